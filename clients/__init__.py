@@ -1,0 +1,12 @@
+"""Poise clients: the shared client library and, per kind, the clients built on it."""
+
+from clients.client import ControllerClient, ServerError, ServerTimeout
+from clients.layout import joint_slices, neutral_joint_position
+
+__all__ = [
+    "ControllerClient",
+    "ServerError",
+    "ServerTimeout",
+    "joint_slices",
+    "neutral_joint_position",
+]

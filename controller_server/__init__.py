@@ -1,0 +1,1 @@
+"""Poise controller server: robot models, controllers and the ZeroMQ server."""

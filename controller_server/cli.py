@@ -1,0 +1,103 @@
+"""The ``poise`` command line: ``poise serve`` and ``poise demo``.
+
+Later capabilities add subcommands here (``sim``, ``replay``, ``bridge``,
+``bench``); each is a function taking the parsed arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+__all__ = ["build_parser", "main"]
+
+DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from controller_server.server import ControllerServer
+
+    server = ControllerServer(args.bind or [DEFAULT_ENDPOINT], session_timeout_s=args.session_timeout)
+
+    def request_stop(signum: int, _frame: object) -> None:
+        logging.getLogger("poise.server").info("signal %d: shutting down", signum)
+        server.stop_event.set()
+
+    signal.signal(signal.SIGINT, request_stop)
+    signal.signal(signal.SIGTERM, request_stop)
+    print(f"poise serve: listening on {', '.join(server.bound_endpoints)}", flush=True)
+    server.serve_forever()
+    print("poise serve: stopped", flush=True)
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from clients.demo import run_demo
+
+    return run_demo(
+        model=args.model, output_dir=Path(args.output), duration_s=args.duration, endpoint=args.connect
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``poise`` (also used to document the CLI)."""
+    parser = argparse.ArgumentParser(
+        prog="poise", description="Poise: whole-body balance control for bipeds, served over ZeroMQ."
+    )
+    parser.add_argument(
+        "--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        help="logging verbosity (default: INFO)",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    serve = commands.add_parser(
+        "serve", help="run the controller server",
+        description="Serve whole-body controllers: one session per client, state in, command out.",
+    )
+    serve.add_argument(
+        "--bind", action="append", metavar="ENDPOINT",
+        help=f"ZeroMQ endpoint to bind, tcp:// or ipc://; repeat for several (default: {DEFAULT_ENDPOINT})",
+    )
+    serve.add_argument(
+        "--session-timeout", type=float, default=30.0, metavar="SECONDS",
+        help="drop a session after this long without a request (default: 30)",
+    )
+    serve.set_defaults(handler=_serve)
+
+    demo = commands.add_parser(
+        "demo", help="start a server and run the demo client, write a plot",
+        description="Start `poise serve` on a free loopback port, run the scripted client against "
+        "it, and write a PNG plot and a JSON summary.",
+    )
+    demo.add_argument(
+        "--model", default="thesis_humanoid", help="built-in model (default: thesis_humanoid)"
+    )
+    demo.add_argument(
+        "--output", default="out", metavar="DIR", help="directory for demo.png and demo.json (default: out)"
+    )
+    demo.add_argument(
+        "--duration", type=float, default=2.0, metavar="SECONDS", help="simulated time (default: 2)"
+    )
+    demo.add_argument(
+        "--connect", default=None, metavar="ENDPOINT",
+        help="use a running server at ENDPOINT instead of starting one",
+    )
+    demo.set_defaults(handler=_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``poise`` console script."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=args.log_level, format="%(asctime)s %(name)s %(levelname)s %(message)s"
+    )
+    return int(args.handler(args))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,38 @@
+"""Controllers behind one interface, looked up by name."""
+
+from collections.abc import Mapping
+from typing import Any
+
+from controller_server.controllers.base import ControlInput, ControlOutput, Controller, ParamSpec
+from controller_server.controllers.tracking import TrackingController
+from controller_server.models import RobotModel
+from protocol.errors import ErrorCode, ProtocolError
+
+__all__ = [
+    "CONTROLLERS",
+    "ControlInput",
+    "ControlOutput",
+    "Controller",
+    "ParamSpec",
+    "TrackingController",
+    "create_controller",
+]
+
+CONTROLLERS: dict[str, type[Controller]] = {cls.name: cls for cls in (TrackingController,)}
+"""Controller classes by the name a client gives in ``hello``."""
+
+
+def create_controller(
+    name: str, robot: RobotModel, params: Mapping[str, Any] | None = None
+) -> Controller:
+    """Instantiate the controller called ``name`` for ``robot``.
+
+    Raises:
+        ProtocolError: ``UNKNOWN_CONTROLLER`` if no controller has that name.
+    """
+    cls = CONTROLLERS.get(name)
+    if cls is None:
+        raise ProtocolError(
+            ErrorCode.UNKNOWN_CONTROLLER, "controller", f"{name=!r}; available: {sorted(CONTROLLERS)}"
+        )
+    return cls(robot, params)

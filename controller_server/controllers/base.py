@@ -1,0 +1,148 @@
+"""The one interface every controller implements, and its parameter handling.
+
+The server talks to controllers only through :class:`Controller`: create it
+for a robot with initial parameters, ``compute`` one tick, read and change
+parameters. Each controller declares its parameters as :class:`ParamSpec`s;
+validation (type, range, length, finiteness) is shared here, so every
+controller refuses bad values the same way, atomically.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from controller_server.errors import InvalidParams
+from controller_server.models import RobotModel
+
+__all__ = ["ControlInput", "ControlOutput", "Controller", "ParamSpec"]
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A run-time parameter: its default, kind and allowed range.
+
+    Attributes:
+        default: Value when not set (``None`` for vectors derived from the model).
+        kind: ``"float"``, ``"vector"`` or ``"choice"``.
+        minimum: Smallest allowed value (floats, vector entries).
+        maximum: Largest allowed value.
+        choices: Allowed strings for ``"choice"``.
+        doc: One line for docs and error messages, with the unit.
+    """
+
+    default: Any
+    kind: str = "float"
+    minimum: float = -math.inf
+    maximum: float = math.inf
+    choices: tuple[str, ...] = ()
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class ControlInput:
+    """One tick's state, in Pinocchio's conventions.
+
+    Attributes:
+        time_s: Client time (s).
+        q: Configuration ``[p_base, quat_xyzw, q_joints]``, ``(nq,)``.
+        v: Velocity ``[v_base_in_base, ω_base_in_base, v_joints]``, ``(nv,)``.
+        contact_flags: One flag per contact of the robot.
+    """
+
+    time_s: float
+    q: np.ndarray
+    v: np.ndarray
+    contact_flags: tuple[bool, ...]
+
+
+@dataclass(frozen=True)
+class ControlOutput:
+    """One tick's result, in Pinocchio's conventions.
+
+    Attributes:
+        acceleration: ``(nv,)`` generalized acceleration.
+        joint_torque: ``(nv − 6,)`` actuated torques.
+        contact_force_in_world: ``(p, 3)`` per contact point (N).
+        position_com_in_world: Centre of mass (m).
+        kkt_condition_number: Condition number of the KKT Schur complement.
+        root_wrench_residual: Root wrench the contact forces could not balance.
+        saturated_joints: DoFs whose torque hit the limit.
+    """
+
+    acceleration: np.ndarray
+    joint_torque: np.ndarray
+    contact_force_in_world: np.ndarray
+    position_com_in_world: np.ndarray
+    kkt_condition_number: float
+    root_wrench_residual: float
+    saturated_joints: int
+
+
+class Controller(ABC):
+    """A whole-body controller for one robot (one per session)."""
+
+    name: ClassVar[str]
+    PARAMETERS: ClassVar[dict[str, ParamSpec]]
+
+    def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
+        self.robot = robot
+        self._params: dict[str, Any] = {
+            key: self.default_value(key) for key in self.PARAMETERS
+        }
+        self.set_params(params or {})
+
+    def default_value(self, key: str) -> Any:
+        """Default of a parameter; override for model-dependent defaults."""
+        return self.PARAMETERS[key].default
+
+    def parameters(self) -> dict[str, Any]:
+        """Every parameter in force, as wire values (floats, strings, lists)."""
+        return {
+            key: [float(x) for x in value] if isinstance(value, np.ndarray) else value
+            for key, value in self._params.items()
+        }
+
+    def set_params(self, params: Mapping[str, Any]) -> None:
+        """Validate all of ``params``, then apply them together (all or nothing).
+
+        Raises:
+            InvalidParams: Naming the first bad key and why.
+        """
+        validated = {key: self._validate(key, value) for key, value in params.items()}
+        self._params.update(validated)
+
+    def _validate(self, key: str, value: Any) -> Any:
+        spec = self.PARAMETERS.get(key)
+        field = f"params.{key}"
+        if spec is None:
+            raise InvalidParams(field, f"unknown parameter; known: {', '.join(self.PARAMETERS)}")
+        if spec.kind == "choice":
+            if value not in spec.choices:
+                raise InvalidParams(field, f"{value=!r}; choose one of {spec.choices}")
+            return value
+        if spec.kind == "float":
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise InvalidParams(field, f"{value=!r} is not a number")
+            array = np.array([float(value)])
+        else:
+            if not isinstance(value, list | tuple | np.ndarray):
+                raise InvalidParams(field, f"{value=!r} is not a list of numbers")
+            array = np.asarray(value, dtype=float).reshape(-1)
+            expected = np.size(self.default_value(key))
+            if array.size != expected:
+                raise InvalidParams(field, f"expected {expected} values, got {array.size}")
+        if not np.all(np.isfinite(array)):
+            raise InvalidParams(field, f"{value=!r} must be finite")
+        if np.any(array < spec.minimum) or np.any(array > spec.maximum):
+            raise InvalidParams(field, f"{value=!r} outside [{spec.minimum}, {spec.maximum}]")
+        return float(array[0]) if spec.kind == "float" else array
+
+    @abstractmethod
+    def compute(self, control_input: ControlInput) -> ControlOutput:
+        """Accelerations and torques for one tick."""

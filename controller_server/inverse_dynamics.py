@@ -1,0 +1,128 @@
+"""Floating-base inverse dynamics with contact forces in friction cones.
+
+Macchietto 2008, eq. 4.2, written with actuated torques ``τ`` (``S = [0 I]``)::
+
+    M q̈ + h = Sᵀ τ + J_cᵀ f
+
+The six root rows have no actuator, so the contact forces ``f`` of the
+supporting feet must balance them. They are distributed by least squares
+within linearized (pyramid) friction cones on a flat ground of normal +z::
+
+    min_f ‖J_c,rootᵀ f − (M q̈ + h)_root‖² + ε ‖f‖²
+    s.t.  f_z ≥ 0,  |f_x| ≤ μ f_z,  |f_y| ≤ μ f_z   at every support point
+
+solved by a maintained QP solver through ``qpsolvers``. The actuated rows give
+``τ``, clipped to the torque limits. When the cones or the limits cannot
+realize ``q̈`` exactly, the returned acceleration is the one ``τ`` and ``f``
+really produce, ``q̈ = M⁻¹ (Sᵀ τ + J_cᵀ f − h)``, so the command is always
+dynamically consistent; the unbalanced root wrench is reported.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import qpsolvers
+import scipy.linalg
+
+from controller_server.dynamics import DynamicsTerms
+
+__all__ = ["InverseDynamicsResult", "friction_pyramid", "solve_inverse_dynamics"]
+
+NUM_ROOT_DOFS = 6
+
+
+@dataclass(frozen=True)
+class InverseDynamicsResult:
+    """Torques, contact forces and the acceleration they produce.
+
+    Attributes:
+        joint_torque: ``(nv − 6,)`` actuated torques within limits (N·m, N).
+        contact_force_in_world: ``(p, 3)`` force at every contact point, zero
+            at points of contacts that are not supports (N).
+        acceleration: ``(nv,)`` generalized acceleration consistent with both.
+        root_wrench_residual: ``‖(M q̈ + h − J_cᵀ f)_root‖`` before correction.
+        saturated_joints: Number of DoFs whose torque was clipped.
+    """
+
+    joint_torque: np.ndarray
+    contact_force_in_world: np.ndarray
+    acceleration: np.ndarray
+    root_wrench_residual: float
+    saturated_joints: int
+
+
+def friction_pyramid(friction_coefficients: Sequence[float]) -> np.ndarray:
+    """Rows ``G`` of ``G f ≤ 0`` for point forces ``f = [f_x, f_y, f_z]`` per point.
+
+    Five rows per point: ``±f_x − μ f_z ≤ 0``, ``±f_y − μ f_z ≤ 0``, ``−f_z ≤ 0``.
+    """
+    count = len(friction_coefficients)
+    rows = np.zeros((5 * count, 3 * count))
+    for i, mu in enumerate(friction_coefficients):
+        block = np.array(
+            [[1, 0, -mu], [-1, 0, -mu], [0, 1, -mu], [0, -1, -mu], [0, 0, -1]], dtype=float
+        )
+        rows[5 * i : 5 * i + 5, 3 * i : 3 * i + 3] = block
+    return rows
+
+
+def solve_inverse_dynamics(
+    terms: DynamicsTerms,
+    acceleration: np.ndarray,
+    supports: Sequence[bool],
+    friction_coefficients: Sequence[float],
+    torque_limit: np.ndarray,
+    force_regularization: float = 1e-6,
+    qp_solver: str = "daqp",
+) -> InverseDynamicsResult:
+    """Torques and contact forces realizing ``acceleration`` (eq. 4.2).
+
+    Args:
+        terms: Dynamics at the current state.
+        acceleration: Desired ``q̈`` from the optimizer, ``(nv,)``.
+        supports: One flag per contact; only supports carry force.
+        friction_coefficients: μ per contact.
+        torque_limit: ``(nv − 6,)`` symmetric limits.
+        force_regularization: ``ε`` spreading force over the points (1/N² scale).
+        qp_solver: Any solver name ``qpsolvers`` knows.
+    """
+    M, h = terms.mass_matrix, terms.bias_forces
+    generalized_force = M @ acceleration + h
+    root_wrench = generalized_force[:NUM_ROOT_DOFS]
+
+    jacobians = [J for J, on in zip(terms.point_jacobians, supports, strict=True) if on]
+    mus = [
+        mu
+        for J, mu, on in zip(terms.point_jacobians, friction_coefficients, supports, strict=True)
+        if on
+        for _ in range(J.shape[0] // 3)
+    ]
+    num_points_total = sum(J.shape[0] // 3 for J in terms.point_jacobians)
+    forces = np.zeros((num_points_total, 3))
+    contact_generalized_force = np.zeros_like(h)
+    if jacobians:
+        J_c = np.vstack(jacobians)
+        G = J_c[:, :NUM_ROOT_DOFS].T
+        P = G.T @ G + force_regularization * np.eye(G.shape[1])
+        solution = qpsolvers.solve_qp(
+            P, -G.T @ root_wrench, friction_pyramid(mus), np.zeros(5 * len(mus)), solver=qp_solver
+        )
+        if solution is not None and np.all(np.isfinite(solution)):
+            contact_generalized_force = J_c.T @ solution
+            support_points = np.concatenate(
+                [np.full(J.shape[0] // 3, on) for J, on in zip(terms.point_jacobians, supports, strict=True)]
+            )
+            forces[support_points] = solution.reshape(-1, 3)
+
+    residual = float(np.linalg.norm(root_wrench - contact_generalized_force[:NUM_ROOT_DOFS]))
+    torque_unclipped = (generalized_force - contact_generalized_force)[NUM_ROOT_DOFS:]
+    joint_torque = np.clip(torque_unclipped, -torque_limit, torque_limit)
+    saturated = int(np.count_nonzero(joint_torque != torque_unclipped))
+
+    applied = contact_generalized_force - h
+    applied[NUM_ROOT_DOFS:] += joint_torque
+    realized = scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), applied)
+    return InverseDynamicsResult(joint_torque, forces, realized, residual, saturated)

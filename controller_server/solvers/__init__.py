@@ -1,0 +1,10 @@
+"""Solvers for the controllers' optimization problems."""
+
+from controller_server.solvers.kkt import (
+    KKTSolution,
+    WeightedProblem,
+    build_weighted_problem,
+    solve_weighted_kkt,
+)
+
+__all__ = ["KKTSolution", "WeightedProblem", "build_weighted_problem", "solve_weighted_kkt"]

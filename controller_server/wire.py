@@ -1,0 +1,99 @@
+"""Conversions between wire conventions and Pinocchio's, at the session edge.
+
+Wire (ARCHITECTURE.md): base pose in world, quaternions scalar-last,
+``linear_velocity_base_in_world``, ``angular_velocity_base_in_base``.
+Pinocchio's free flyer: ``q = [p, quat_xyzw, q_joints]`` and
+``v = [v_base_in_base, ω_base_in_base, v_joints]``. Accelerations go back as
+the classical acceleration of the base origin in world axes and the angular
+acceleration in base axes: ``a_world = R (v̇_local + ω × v_local)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from controller_server.controllers import ControlInput, ControlOutput
+from controller_server.models import RobotModel
+from protocol.errors import ErrorCode, ProtocolError
+from protocol.messages import Command, Diagnostics, State
+
+__all__ = ["command_from_output", "control_input_from_state"]
+
+MIN_QUATERNION_NORM = 1e-6
+
+
+def _check_length(field: str, array: np.ndarray, expected: int, seq: int) -> None:
+    if array.size != expected:
+        raise ProtocolError(
+            ErrorCode.BAD_SHAPE, field, f"expected {expected} values for this robot, got {array.size}", seq
+        )
+
+
+def _check_quaternion(field: str, quaternion: np.ndarray, seq: int) -> None:
+    norm = float(np.linalg.norm(quaternion))
+    if norm < MIN_QUATERNION_NORM:
+        raise ProtocolError(ErrorCode.INVALID_FIELD, field, f"quaternion has norm {norm:.3g}", seq)
+
+
+def control_input_from_state(robot: RobotModel, state: State) -> ControlInput:
+    """Validate a state's sizes against the robot and convert it.
+
+    Raises:
+        ProtocolError: ``BAD_SHAPE`` (wrong lengths) or ``INVALID_FIELD``
+            (zero quaternion), naming the field.
+    """
+    seq = state.seq
+    _check_length("joint_position", state.joint_position, robot.nq_joints, seq)
+    _check_length("joint_velocity", state.joint_velocity, robot.nv_joints, seq)
+    if len(state.contact_flags) != len(robot.contacts):
+        raise ProtocolError(
+            ErrorCode.BAD_SHAPE,
+            "contact_flags",
+            f"expected {len(robot.contacts)} flags ({', '.join(c.name for c in robot.contacts)}), "
+            f"got {len(state.contact_flags)}",
+            seq,
+        )
+    _check_quaternion("orientation_base_in_world_xyzw", state.orientation_base_in_world_xyzw, seq)
+    for joint in robot.joints:
+        if joint.kind == "ball":
+            start = robot.model.idx_qs[robot.model.getJointId(joint.name)] - 7
+            _check_quaternion("joint_position", state.joint_position[start : start + 4], seq)
+
+    q = np.concatenate(
+        [state.position_base_in_world, state.orientation_base_in_world_xyzw, state.joint_position]
+    )
+    pin.normalize(robot.model, q)
+    rotation_base_to_world = pin.Quaternion(q[3:7]).toRotationMatrix()
+    v = np.concatenate(
+        [
+            rotation_base_to_world.T @ state.linear_velocity_base_in_world,
+            state.angular_velocity_base_in_base,
+            state.joint_velocity,
+        ]
+    )
+    return ControlInput(state.time_s, q, v, tuple(state.contact_flags))
+
+
+def command_from_output(
+    control_input: ControlInput, output: ControlOutput, seq: int, compute_time_s: float
+) -> Command:
+    """Build the ``command`` reply for one tick."""
+    q, v, a = control_input.q, control_input.v, output.acceleration
+    rotation_base_to_world = pin.Quaternion(q[3:7]).toRotationMatrix()
+    linear_acceleration_in_world = rotation_base_to_world @ (a[:3] + np.cross(v[3:6], v[:3]))
+    return Command(
+        seq=seq,
+        joint_acceleration=a[6:],
+        base_linear_acceleration_in_world=linear_acceleration_in_world,
+        base_angular_acceleration_in_base=a[3:6],
+        joint_torque=output.joint_torque,
+        contact_force_in_world=output.contact_force_in_world.reshape(-1),
+        diagnostics=Diagnostics(
+            compute_time_s=compute_time_s,
+            position_com_in_world=output.position_com_in_world,
+            kkt_condition_number=output.kkt_condition_number,
+            root_wrench_residual=output.root_wrench_residual,
+            saturated_joints=output.saturated_joints,
+        ),
+    )

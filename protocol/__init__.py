@@ -1,0 +1,47 @@
+"""The Poise wire contract: messages, msgpack codec, version and error codes."""
+
+from protocol.codec import MAX_MESSAGE_BYTES, decode, encode
+from protocol.errors import ErrorCode, PoiseError, ProtocolError
+from protocol.messages import (
+    MESSAGE_TYPES,
+    PROTOCOL_VERSION,
+    Bye,
+    Command,
+    ContactSpec,
+    Diagnostics,
+    Error,
+    Hello,
+    JointInfo,
+    Message,
+    Params,
+    SessionStats,
+    SetParams,
+    State,
+    Stats,
+    Welcome,
+)
+
+__all__ = [
+    "MAX_MESSAGE_BYTES",
+    "MESSAGE_TYPES",
+    "PROTOCOL_VERSION",
+    "Bye",
+    "Command",
+    "ContactSpec",
+    "Diagnostics",
+    "Error",
+    "ErrorCode",
+    "Hello",
+    "JointInfo",
+    "Message",
+    "Params",
+    "PoiseError",
+    "ProtocolError",
+    "SessionStats",
+    "SetParams",
+    "State",
+    "Stats",
+    "Welcome",
+    "decode",
+    "encode",
+]

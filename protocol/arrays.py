@@ -1,0 +1,86 @@
+"""Numeric arrays on the wire: little-endian float64 bytes.
+
+Arrays travel as msgpack ``bin`` values holding ``<f8`` data, so a 45-DoF
+state costs 360 bytes per vector instead of 45 msgpack floats, and decoding
+is a single ``numpy.frombuffer``. In Python the fields are ``numpy`` arrays;
+lists are accepted when a message is built in code.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import BeforeValidator, PlainSerializer, WithJsonSchema
+from pydantic_core import PydanticCustomError
+
+__all__ = ["FiniteArray", "FloatArray", "Vector3", "QuaternionXYZW", "array_to_bytes"]
+
+WIRE_DTYPE = np.dtype("<f8")
+
+
+def array_to_bytes(array: np.ndarray) -> bytes:
+    """Pack a float array as little-endian float64 bytes."""
+    return np.ascontiguousarray(array, dtype=WIRE_DTYPE).tobytes()
+
+
+def _parse(value: Any, *, length: int | None, finite: bool) -> np.ndarray:
+    if isinstance(value, bytes | bytearray | memoryview):
+        raw = bytes(value)
+        if len(raw) % WIRE_DTYPE.itemsize:
+            raise PydanticCustomError(
+                "bad_shape",
+                "float64 array needs a multiple of 8 bytes, got {n} bytes",
+                {"n": len(raw)},
+            )
+        array = np.frombuffer(raw, dtype=WIRE_DTYPE).astype(np.float64)
+    elif isinstance(value, np.ndarray | list | tuple):
+        try:
+            array = np.array(value, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError) as exc:
+            raise PydanticCustomError(
+                "invalid_array", "expected numbers: {error}", {"error": str(exc)}
+            ) from None
+        if np.ndim(value) > 1 or (isinstance(value, np.ndarray) and value.ndim != 1):
+            raise PydanticCustomError("bad_shape", "expected a flat (1-D) array", {})
+    else:
+        raise PydanticCustomError(
+            "invalid_array",
+            "expected float64 bytes (little-endian), got {kind}",
+            {"kind": type(value).__name__},
+        )
+    if length is not None and array.size != length:
+        raise PydanticCustomError(
+            "bad_shape",
+            "expected {expected} values, got {actual}",
+            {"expected": length, "actual": array.size},
+        )
+    if finite and not np.all(np.isfinite(array)):
+        raise PydanticCustomError(
+            "non_finite",
+            "values must be finite, got NaN/inf at index {index}",
+            {"index": int(np.flatnonzero(~np.isfinite(array))[0])},
+        )
+    array.setflags(write=False)
+    return array
+
+
+def _array_type(length: int | None, finite: bool) -> Any:
+    return Annotated[
+        np.ndarray,
+        BeforeValidator(lambda value: _parse(value, length=length, finite=finite)),
+        PlainSerializer(array_to_bytes, return_type=bytes),
+        WithJsonSchema(
+            {"type": "string", "format": "binary", "description": "little-endian float64"}
+        ),
+    ]
+
+
+FloatArray = _array_type(None, finite=False)
+"""Any-length float64 array; NaN/inf allowed (used in replies only)."""
+FiniteArray = _array_type(None, finite=True)
+"""Any-length float64 array that must be finite (all request arrays)."""
+Vector3 = _array_type(3, finite=True)
+"""Three finite float64 values."""
+QuaternionXYZW = _array_type(4, finite=True)
+"""Unit quaternion, scalar last ``[x, y, z, w]`` (normalised by the server)."""
