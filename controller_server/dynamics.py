@@ -26,7 +26,7 @@ import pinocchio as pin
 
 from controller_server.models import RobotModel
 
-__all__ = ["DynamicsTerms", "compute_dynamics_terms", "skew"]
+__all__ = ["DynamicsTerms", "compute_dynamics_terms", "cross", "skew"]
 
 WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -34,6 +34,13 @@ WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 def skew(u: np.ndarray) -> np.ndarray:
     """Cross-product matrix ``[u]×`` (Macchietto 2008, eq. A.4)."""
     return np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis, broadcasting (``numpy.cross`` without its overhead)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 @dataclass(frozen=True)
@@ -100,18 +107,19 @@ def compute_dynamics_terms(
         support_jacobians.append(jacobian)
         support_drifts.append(np.concatenate([drift.linear, drift.angular]))
 
-        rotation = data.oMf[frame_id].rotation
-        offsets_in_world = contact.points_in_frame @ rotation.T
+        offsets_in_world = contact.points_in_frame @ data.oMf[frame_id].rotation.T
+        # v_p = v_o + ω × r  and  a_p = a_o + α × r + ω × (ω × r), all points at once.
+        angular_rows = np.broadcast_to(jacobian[3:].T, (len(offsets_in_world), *jacobian[3:].T.shape))
+        lever_rows = cross(angular_rows, offsets_in_world[:, None, :])  # (k, nv, 3): J_ω × r
+        point_jacobians.append((jacobian[None, :3, :] + lever_rows.transpose(0, 2, 1)).reshape(-1, model.nv))
         omega = velocity.angular
-        rows, drifts = [], []
-        for offset in offsets_in_world:
-            # v_p = v_o + ω × r  and  a_p = a_o + α × r + ω × (ω × r).
-            rows.append(jacobian[:3] - skew(offset) @ jacobian[3:])
-            drifts.append(
-                drift.linear + np.cross(drift.angular, offset) + np.cross(omega, np.cross(omega, offset))
-            )
-        point_jacobians.append(np.vstack(rows))
-        point_drifts.append(np.concatenate(drifts))
+        point_drifts.append(
+            (
+                drift.linear
+                + cross(drift.angular, offsets_in_world)
+                + cross(omega, cross(omega, offsets_in_world))
+            ).reshape(-1)
+        )
         point_positions.append(data.oMf[frame_id].translation + offsets_in_world)
 
     return DynamicsTerms(

@@ -5,13 +5,17 @@ Macchietto 2008, eq. 4.2, written with actuated torques ``τ`` (``S = [0 I]``)::
     M q̈ + h = Sᵀ τ + J_cᵀ f
 
 The six root rows have no actuator, so the contact forces ``f`` of the
-supporting feet must balance them. They are distributed by least squares
-within linearized (pyramid) friction cones on a flat ground of normal +z::
+supporting feet must balance them, within linearized (pyramid) friction
+cones on a flat ground of normal +z (``f_z ≥ 0``, ``|f_x|, |f_y| ≤ μ f_z`` at
+every support point). The distribution is the smallest force that balances
+exactly::
 
-    min_f ‖J_c,rootᵀ f − (M q̈ + h)_root‖² + ε ‖f‖²
-    s.t.  f_z ≥ 0,  |f_x| ≤ μ f_z,  |f_y| ≤ μ f_z   at every support point
+    min_f ‖f‖²   s.t.  J_c,rootᵀ f = (M q̈ + h)_root,  f in the cones
 
-solved by a maintained QP solver through ``qpsolvers``. The actuated rows give
+and, when no force in the cones can (centre of pressure outside the feet,
+too much traction), the least-squares balance
+``min_f ‖J_c,rootᵀ f − (M q̈ + h)_root‖² + ε ‖f‖²``. Both are QPs solved by a
+maintained solver through ``qpsolvers``. The actuated rows give
 ``τ``, clipped to the torque limits. When the cones or the limits cannot
 realize ``q̈`` exactly, the returned acceleration is the one ``τ`` and ``f``
 really produce, ``q̈ = M⁻¹ (Sᵀ τ + J_cᵀ f − h)``, so the command is always
@@ -29,7 +33,12 @@ import scipy.linalg
 
 from controller_server.dynamics import DynamicsTerms
 
-__all__ = ["InverseDynamicsResult", "friction_pyramid", "solve_inverse_dynamics"]
+__all__ = [
+    "InverseDynamicsResult",
+    "distribute_contact_forces",
+    "friction_pyramid",
+    "solve_inverse_dynamics",
+]
 
 NUM_ROOT_DOFS = 6
 
@@ -69,6 +78,37 @@ def friction_pyramid(friction_coefficients: Sequence[float]) -> np.ndarray:
     return rows
 
 
+def distribute_contact_forces(
+    G: np.ndarray,
+    wrench: np.ndarray,
+    friction_coefficients: Sequence[float],
+    regularization: float,
+    qp_solver: str,
+) -> np.ndarray | None:
+    """Point forces ``f`` in the cones with ``G f = wrench``, or closest to it.
+
+    Args:
+        G: ``(6, 3p)`` map from point forces to the root wrench (``J_c,rootᵀ``).
+        wrench: Root wrench to balance.
+        friction_coefficients: μ per point.
+        regularization: ``ε`` of the least-squares fallback.
+        qp_solver: Solver name for ``qpsolvers``.
+
+    Returns:
+        ``(3p,)`` forces, or ``None`` if the solver failed.
+    """
+    n = G.shape[1]
+    cones = friction_pyramid(friction_coefficients)
+    zeros = np.zeros(cones.shape[0])
+    forces = qpsolvers.solve_qp(
+        np.eye(n), np.zeros(n), cones, zeros, A=G, b=wrench, solver=qp_solver
+    )
+    if forces is None or not np.all(np.isfinite(forces)):
+        P = G.T @ G + regularization * np.eye(n)
+        forces = qpsolvers.solve_qp(P, -G.T @ wrench, cones, zeros, solver=qp_solver)
+    return forces if forces is not None and np.all(np.isfinite(forces)) else None
+
+
 def solve_inverse_dynamics(
     terms: DynamicsTerms,
     acceleration: np.ndarray,
@@ -86,7 +126,7 @@ def solve_inverse_dynamics(
         supports: One flag per contact; only supports carry force.
         friction_coefficients: μ per contact.
         torque_limit: ``(nv − 6,)`` symmetric limits.
-        force_regularization: ``ε`` spreading force over the points (1/N² scale).
+        force_regularization: ``ε`` of the least-squares fallback.
         qp_solver: Any solver name ``qpsolvers`` knows.
     """
     M, h = terms.mass_matrix, terms.bias_forces
@@ -105,12 +145,10 @@ def solve_inverse_dynamics(
     contact_generalized_force = np.zeros_like(h)
     if jacobians:
         J_c = np.vstack(jacobians)
-        G = J_c[:, :NUM_ROOT_DOFS].T
-        P = G.T @ G + force_regularization * np.eye(G.shape[1])
-        solution = qpsolvers.solve_qp(
-            P, -G.T @ root_wrench, friction_pyramid(mus), np.zeros(5 * len(mus)), solver=qp_solver
+        solution = distribute_contact_forces(
+            J_c[:, :NUM_ROOT_DOFS].T, root_wrench, mus, force_regularization, qp_solver
         )
-        if solution is not None and np.all(np.isfinite(solution)):
+        if solution is not None:
             contact_generalized_force = J_c.T @ solution
             support_points = np.concatenate(
                 [np.full(J.shape[0] // 3, on) for J, on in zip(terms.point_jacobians, supports, strict=True)]

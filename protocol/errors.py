@@ -13,36 +13,33 @@ __all__ = ["ErrorCode", "PoiseError", "ProtocolError"]
 
 
 class ErrorCode(IntEnum):
-    """Error codes carried by the ``error`` message (stable on the wire)."""
+    """Error codes carried by the ``error`` message (stable on the wire).
 
-    MALFORMED = 1
-    """The bytes are not a msgpack map (garbage, truncated, too large)."""
-    UNSUPPORTED_VERSION = 2
-    """The ``version`` key is missing or not the server's protocol version."""
-    UNKNOWN_TYPE = 3
-    """The ``type`` key names no message of this protocol."""
-    INVALID_FIELD = 4
-    """A key is missing, unknown, or has the wrong type or range."""
-    BAD_SHAPE = 5
-    """A numeric array has the wrong length for the robot of this session."""
-    NON_FINITE = 6
-    """A numeric array holds NaN or infinity where finite values are required."""
-    NO_SESSION = 7
-    """A session message (``state``, ``set_params``) arrived before ``hello``."""
-    MODEL_NOT_FOUND = 8
-    """The model named in ``hello`` is neither built in nor a readable file."""
-    MODEL_INVALID = 9
-    """The model file could not be parsed or lacks what the controller needs."""
-    MODEL_MISMATCH = 10
-    """The client's expected model hash differs from the server's model."""
-    UNKNOWN_CONTROLLER = 11
-    """The controller named in ``hello`` does not exist."""
-    INVALID_PARAMS = 12
-    """A controller parameter is unknown or its value is out of range."""
-    UNEXPECTED_MESSAGE = 13
-    """A reply-only message (``welcome``, ``command``, …) was sent to the server."""
-    INTERNAL = 14
-    """The controller failed on a valid request; the session is kept."""
+    Each member has a ``description`` (what it means and what to check).
+    """
+
+    description: str
+
+    def __new__(cls, value: int, description: str) -> ErrorCode:
+        member = int.__new__(cls, value)
+        member._value_ = value
+        member.description = description
+        return member
+
+    MALFORMED = 1, "The bytes are not one msgpack map (garbage, truncated, several frames)."
+    UNSUPPORTED_VERSION = 2, "`version` is missing or not the server's protocol version."
+    UNKNOWN_TYPE = 3, "`type` names no message of this protocol."
+    INVALID_FIELD = 4, "A key is missing, unknown, or has the wrong type or range."
+    BAD_SHAPE = 5, "A numeric array has the wrong length (for the message or this robot)."
+    NON_FINITE = 6, "A numeric value is NaN or infinite where finite values are required."
+    NO_SESSION = 7, "`state`, `set_params` or `bye` arrived before `hello` (or after expiry)."
+    MODEL_NOT_FOUND = 8, "The model in `hello` is neither built in nor a readable server file."
+    MODEL_INVALID = 9, "The model could not be parsed, or lacks contacts or supported joints."
+    MODEL_MISMATCH = 10, "`expected_model_hash` differs from the hash of the server's model."
+    UNKNOWN_CONTROLLER = 11, "The controller named in `hello` does not exist."
+    INVALID_PARAMS = 12, "A controller parameter is unknown or its value is out of range."
+    UNEXPECTED_MESSAGE = 13, "A reply-only message (`welcome`, `command`, …) was sent as a request."
+    INTERNAL = 14, "The controller failed on a valid request; the session is kept."
 
 
 class PoiseError(Exception):

@@ -4,13 +4,13 @@ One pydantic model per message ``type``. Every message carries ``version``
 (:data:`PROTOCOL_VERSION`) and ``seq``; every reply echoes the ``seq`` of its
 request. Conventions (ARCHITECTURE.md): SI units, world frame z up, base pose
 in world, quaternions scalar-last ``[x, y, z, w]``, joint order as announced
-in ``welcome``. ``docs/protocol.md`` tables every key; it is generated from
-these models' field descriptions (``python -m protocol.docgen``).
+in ``welcome``. Every field declares its shape, unit and frame, and
+``docs/protocol.md`` is generated from them (``python -m protocol.docgen``).
 """
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -34,6 +34,7 @@ __all__ = [
     "State",
     "Stats",
     "Welcome",
+    "wire_field",
 ]
 
 PROTOCOL_VERSION = 1
@@ -41,34 +42,45 @@ PROTOCOL_VERSION = 1
 
 ParamValue = float | int | bool | str | list[float]
 
-Seq = Annotated[int, Field(ge=0, le=2**63 - 1, description="Request sequence number.")]
+
+def wire_field(
+    description: str, *, shape: str = "", unit: str = "", frame: str = "", **kwargs: Any
+) -> Any:
+    """A pydantic ``Field`` that also records shape, unit and frame for the docs."""
+    return Field(
+        description=description,
+        json_schema_extra={"shape": shape, "unit": unit, "frame": frame},
+        **kwargs,
+    )
 
 
-class Message(BaseModel):
-    """Fields every message carries."""
-
+class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True)
 
-    type: str = Field(description="Message type name.")
-    version: int = Field(
-        default=PROTOCOL_VERSION, description="Protocol version; must equal the server's."
+
+class Message(_Strict):
+    """Fields every message carries."""
+
+    type: str = wire_field("Message type name.")
+    version: int = wire_field(
+        "Protocol version; must equal the server's.", default=PROTOCOL_VERSION
     )
-    seq: Seq = 0
+    seq: int = wire_field(
+        "Request sequence number; replies echo it.", default=0, ge=0, le=2**63 - 1
+    )
 
 
-class ContactSpec(BaseModel):
+class ContactSpec(_Strict):
     """A foot (or other support) and the points through which it touches the ground."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    name: str = Field(description="Contact name, e.g. `left_foot`.")
-    frame: str = Field(description="Model frame the points are expressed in, e.g. `left_sole`.")
-    points_in_frame: list[tuple[float, float, float]] = Field(
-        min_length=1,
-        description="Contact points (m) in `frame`; the corners of the sole rectangle.",
+    name: str = wire_field("Contact name, e.g. `left_foot`.")
+    frame: str = wire_field("Model frame the points are expressed in, e.g. `left_sole`.")
+    points_in_frame: list[tuple[float, float, float]] = wire_field(
+        "Contact points: the corners of the sole rectangle.",
+        shape="k × 3", unit="m", frame="`frame`", min_length=1,
     )
-    friction_coefficient: float = Field(
-        default=0.8, gt=0.0, le=10.0, description="Coulomb friction coefficient μ (1)."
+    friction_coefficient: float = wire_field(
+        "Coulomb friction coefficient μ.", unit="1", default=0.8, gt=0.0, le=10.0
     )
 
     @model_validator(mode="after")
@@ -83,28 +95,30 @@ class Hello(Message):
     """Open a session: pick the robot model and the controller."""
 
     type: Literal["hello"] = "hello"
-    model: str | None = Field(
+    model: str | None = wire_field(
+        "Built-in model name (`thesis_humanoid`, `revolute_humanoid`, `dino_biped`) or a "
+        "file path on the server.",
         default=None,
-        description="Built-in model name (`thesis_humanoid`, …) or a path on the server.",
     )
-    model_text: str | None = Field(
-        default=None, max_length=8_000_000, description="Model file text sent by the client."
+    model_text: str | None = wire_field(
+        "Model file text sent by the client (instead of `model`).",
+        default=None, max_length=8_000_000,
     )
-    model_format: Literal["mjcf", "urdf"] = Field(
-        default="mjcf", description="Format of `model_text` (and of `model` if a path)."
+    model_format: Literal["mjcf", "urdf"] = wire_field(
+        "Format of `model_text` (a `model` path ending in `.urdf` is URDF).", default="mjcf"
     )
-    contacts: list[ContactSpec] | None = Field(
+    contacts: list[ContactSpec] | None = wire_field(
+        "Contact definitions (see ContactSpec); default: every `*_sole` box site of an MJCF.",
         default=None,
-        description="Contact definitions; default: every `*_sole` box site of an MJCF model.",
     )
-    controller: str = Field(default="tracking", description="Controller name.")
-    params: dict[str, ParamValue] = Field(
-        default_factory=dict, description="Initial controller parameters (see `params`)."
+    controller: str = wire_field("Controller name (`tracking`).", default="tracking")
+    params: dict[str, ParamValue] = wire_field(
+        "Initial controller parameters (see the parameter table).", default_factory=dict
     )
-    expected_model_hash: str | None = Field(
-        default=None, description="If set, the server refuses a model with another hash."
+    expected_model_hash: str | None = wire_field(
+        "If set, the server refuses a model whose hash differs.", default=None
     )
-    client_name: str = Field(default="", max_length=200, description="Free text for logs.")
+    client_name: str = wire_field("Free text for the server's logs.", default="", max_length=200)
 
     @model_validator(mode="after")
     def _one_model_source(self) -> Hello:
@@ -113,23 +127,21 @@ class Hello(Message):
         return self
 
 
-class JointInfo(BaseModel):
+class JointInfo(_Strict):
     """One actuated joint, in wire order."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    name: str = Field(description="Joint name from the model file.")
-    kind: Literal["revolute", "prismatic", "ball"] = Field(description="Joint kind.")
-    nq: int = Field(description="Entries in `joint_position` (ball: 4, quaternion xyzw).")
-    nv: int = Field(description="Entries in `joint_velocity`, `joint_torque` (ball: 3).")
-    torque_limit: list[float] = Field(
-        description="Symmetric torque limit per DoF (N·m or N), length `nv`."
+    name: str = wire_field("Joint name from the model file.")
+    kind: Literal["revolute", "prismatic", "ball"] = wire_field("Joint kind.")
+    nq: int = wire_field("Entries in `joint_position` (ball: 4, a quaternion xyzw).")
+    nv: int = wire_field("Entries in `joint_velocity` and `joint_torque` (ball: 3).")
+    torque_limit: list[float] = wire_field(
+        "Symmetric torque limit per DoF.", shape="nv", unit="N·m (N)"
     )
-    position_lower: list[float] | None = Field(
-        description="Lower position limit (rad or m), `null` for ball joints."
+    position_lower: list[float] | None = wire_field(
+        "Lower position limit; `null` for ball joints.", shape="nq", unit="rad (m)"
     )
-    position_upper: list[float] | None = Field(
-        description="Upper position limit (rad or m), `null` for ball joints."
+    position_upper: list[float] | None = wire_field(
+        "Upper position limit; `null` for ball joints.", shape="nq", unit="rad (m)"
     )
 
 
@@ -137,114 +149,124 @@ class Welcome(Message):
     """Reply to ``hello``: what the server will control, so mismatches fail now."""
 
     type: Literal["welcome"] = "welcome"
-    session_id: str = Field(description="Server-chosen session identifier.")
-    model_name: str = Field(description="Model name.")
-    model_hash: str = Field(description="SHA-256 of the model text and contact definitions.")
-    total_mass: float = Field(description="Total mass (kg).")
-    standing_position_base_in_world: tuple[float, float, float] = Field(
-        description="Base position (m) at which the neutral pose stands on z = 0."
+    session_id: str = wire_field("Server-chosen session identifier.")
+    model_name: str = wire_field("Model name.")
+    model_hash: str = wire_field("SHA-256 of the model file text and the contact definitions.")
+    total_mass: float = wire_field("Total mass.", unit="kg")
+    standing_position_base_in_world: tuple[float, float, float] = wire_field(
+        "Base position at which the neutral pose stands with its soles on z = 0.",
+        shape="3", unit="m", frame="world",
     )
-    joints: list[JointInfo] = Field(description="Actuated joints in wire order.")
-    contacts: list[ContactSpec] = Field(description="Contacts in `contact_flags` order.")
-    controller: str = Field(description="Controller serving this session.")
-    params: dict[str, ParamValue] = Field(description="Controller parameters in force.")
+    joints: list[JointInfo] = wire_field("Actuated joints in wire order (see JointInfo).")
+    contacts: list[ContactSpec] = wire_field("Contacts in `contact_flags` order.")
+    controller: str = wire_field("Controller serving this session.")
+    params: dict[str, ParamValue] = wire_field("Controller parameters in force.")
 
 
 class State(Message):
     """Robot state measured by the client at ``time_s``."""
 
     type: Literal["state"] = "state"
-    time_s: float = Field(allow_inf_nan=False, description="Client time (s).")
-    joint_position: FiniteArray = Field(
-        description="Joint positions (rad, m; ball: quaternion xyzw), wire order, Σ nq."
+    time_s: float = wire_field("Client time.", unit="s", allow_inf_nan=False)
+    joint_position: FiniteArray = wire_field(
+        "Joint positions in wire order; a ball joint is a quaternion xyzw of child in parent.",
+        shape="Σ nq", unit="rad (m)", frame="joint",
     )
-    joint_velocity: FiniteArray = Field(
-        description="Joint velocities (rad/s, m/s; ball: in child frame), Σ nv."
+    joint_velocity: FiniteArray = wire_field(
+        "Joint velocities in wire order; a ball joint's is in its child frame.",
+        shape="Σ nv", unit="rad/s (m/s)", frame="joint",
     )
-    position_base_in_world: Vector3 = Field(description="Base (root body) origin in world (m).")
-    orientation_base_in_world_xyzw: QuaternionXYZW = Field(
-        description="Base orientation in world, scalar last (normalised by the server)."
+    position_base_in_world: Vector3 = wire_field(
+        "Base (root body) origin.", shape="3", unit="m", frame="world"
     )
-    linear_velocity_base_in_world: Vector3 = Field(
-        description="Velocity of the base origin, in world axes (m/s)."
+    orientation_base_in_world_xyzw: QuaternionXYZW = wire_field(
+        "Base orientation, scalar last; normalised by the server.", shape="4", frame="world"
     )
-    angular_velocity_base_in_base: Vector3 = Field(
-        description="Base angular velocity, in base axes (rad/s)."
+    linear_velocity_base_in_world: Vector3 = wire_field(
+        "Velocity of the base origin.", shape="3", unit="m/s", frame="world"
     )
-    contact_flags: list[bool] = Field(
-        description="Per contact (welcome order): is it a support this tick."
+    angular_velocity_base_in_base: Vector3 = wire_field(
+        "Base angular velocity.", shape="3", unit="rad/s", frame="base"
+    )
+    contact_flags: list[bool] = wire_field(
+        "Per contact (welcome order): is it a support this tick.", shape="contacts"
     )
 
 
-class Diagnostics(BaseModel):
+class Diagnostics(_Strict):
     """What the controller did this tick (for logs and plots)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True)
-
-    compute_time_s: float = Field(description="Server time spent on this tick (s).")
-    position_com_in_world: Vector3 = Field(description="Centre of mass (m).")
-    kkt_condition_number: float = Field(
-        description="Condition number of the KKT Schur complement (1)."
+    compute_time_s: float = wire_field("Server time spent on this tick.", unit="s")
+    position_com_in_world: Vector3 = wire_field(
+        "Centre of mass.", shape="3", unit="m", frame="world"
     )
-    root_wrench_residual: float = Field(
-        description="Norm of the root wrench the contact forces could not balance (N, N·m)."
+    kkt_condition_number: float = wire_field(
+        "Condition number of the KKT Schur complement C M⁻¹ Cᵀ (Macchietto App. D).", unit="1"
     )
-    saturated_joints: int = Field(description="DoFs whose torque hit its limit.")
+    root_wrench_residual: float = wire_field(
+        "Norm of the root wrench the contact forces could not balance.", unit="N, N·m"
+    )
+    saturated_joints: int = wire_field("Number of DoFs whose torque hit its limit.")
 
 
 class Command(Message):
     """Reply to ``state``: accelerations and torques for that state."""
 
     type: Literal["command"] = "command"
-    joint_acceleration: FloatArray = Field(description="Joint accelerations (rad/s², m/s²), Σ nv.")
-    base_linear_acceleration_in_world: FloatArray = Field(
-        description="Acceleration of the base origin, world axes (m/s²), 3."
+    joint_acceleration: FloatArray = wire_field(
+        "Joint accelerations in wire order.", shape="Σ nv", unit="rad/s² (m/s²)", frame="joint"
     )
-    base_angular_acceleration_in_base: FloatArray = Field(
-        description="Base angular acceleration, base axes (rad/s²), 3."
+    base_linear_acceleration_in_world: FloatArray = wire_field(
+        "Acceleration of the base origin.", shape="3", unit="m/s²", frame="world"
     )
-    joint_torque: FloatArray = Field(description="Joint torques (N·m, N), Σ nv.")
-    contact_force_in_world: FloatArray = Field(
-        description="Force at each contact point (N), world axes, contacts × points × 3."
+    base_angular_acceleration_in_base: FloatArray = wire_field(
+        "Base angular acceleration.", shape="3", unit="rad/s²", frame="base"
     )
-    diagnostics: Diagnostics = Field(description="See the diagnostics table.")
+    joint_torque: FloatArray = wire_field(
+        "Joint torques in wire order, within the limits.", shape="Σ nv", unit="N·m (N)",
+        frame="joint",
+    )
+    contact_force_in_world: FloatArray = wire_field(
+        "Force at each contact point (contacts in welcome order, points in order); zero "
+        "at contacts that are not supports.",
+        shape="Σ k × 3", unit="N", frame="world",
+    )
+    diagnostics: Diagnostics = wire_field("See the Diagnostics table.")
 
 
 class SetParams(Message):
-    """Change controller parameters of this session at run time."""
+    """Change controller parameters of this session at run time (all or nothing)."""
 
     type: Literal["set_params"] = "set_params"
-    params: dict[str, ParamValue] = Field(description="Parameter name → new value.")
+    params: dict[str, ParamValue] = wire_field("Parameter name → new value.")
 
 
 class Params(Message):
     """Reply to ``set_params``: every parameter now in force."""
 
     type: Literal["params"] = "params"
-    params: dict[str, ParamValue] = Field(description="Parameter name → value in force.")
+    params: dict[str, ParamValue] = wire_field("Parameter name → value in force.")
 
 
-class SessionStats(BaseModel):
+class SessionStats(_Strict):
     """Per-session counters in a ``stats`` reply."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    session_id: str = Field(description="Session identifier.")
-    model_name: str = Field(description="Model of the session.")
-    controller: str = Field(description="Controller of the session.")
-    ticks: int = Field(description="`state` messages answered with a `command`.")
-    errors: int = Field(description="Requests answered with an `error`.")
-    compute_time_p50_s: float = Field(description="Median compute time, last 1000 ticks (s).")
-    compute_time_p99_s: float = Field(description="99th-percentile compute time (s).")
-    idle_s: float = Field(description="Time since the last request (s).")
+    session_id: str = wire_field("Session identifier.")
+    model_name: str = wire_field("Model of the session.")
+    controller: str = wire_field("Controller of the session.")
+    ticks: int = wire_field("`state` messages answered with a `command`.")
+    errors: int = wire_field("Requests of this client answered with an `error`.")
+    compute_time_p50_s: float = wire_field("Median compute time over the last 1000 ticks.", unit="s")
+    compute_time_p99_s: float = wire_field("99th-percentile compute time, same window.", unit="s")
+    idle_s: float = wire_field("Time since the session's last request.", unit="s")
 
 
 class Stats(Message):
     """Request (no ``sessions``) or reply (with ``sessions``) of server statistics."""
 
     type: Literal["stats"] = "stats"
-    sessions: list[SessionStats] | None = Field(
-        default=None, description="Reply only: one entry per live session."
+    sessions: list[SessionStats] | None = wire_field(
+        "Reply only: one entry per live session (see SessionStats).", default=None
     )
 
 
@@ -258,10 +280,10 @@ class Error(Message):
     """Reply to a request the server could not serve."""
 
     type: Literal["error"] = "error"
-    seq: int = Field(default=-1, ge=-1, description="Seq of the bad request, -1 if unreadable.")
-    code: ErrorCode = Field(description="`ErrorCode` value (see the error table).")
-    field: str = Field(default="", description="Dotted path of the offending key.")
-    detail: str = Field(description="What is wrong, with the bad value.")
+    seq: int = wire_field("Seq of the bad request, -1 if it was unreadable.", default=-1, ge=-1)
+    code: ErrorCode = wire_field("Error code (see the error table).")
+    field: str = wire_field("Dotted path of the offending key, `\"\"` for the whole message.", default="")
+    detail: str = wire_field("What is wrong, with the bad value.")
 
 
 MESSAGE_TYPES: dict[str, type[Message]] = {

@@ -141,9 +141,9 @@ def _mjcf_torque_limits(root: ET.Element, model: pin.Model) -> np.ndarray:
         bound = np.inf
         for key in ("ctrlrange", "forcerange"):
             if key in actuator.attrib:
+                # MuJoCo clamps the actuator force, then multiplies by the gear.
                 lo, hi = (float(x) for x in actuator.get(key, "").split())
-                scale = 1.0 if key == "forcerange" else np.max(np.abs(gear))
-                bound = min(bound, scale * max(abs(lo), abs(hi)))
+                bound = min(bound, np.max(np.abs(gear)) * max(abs(lo), abs(hi)))
         axes = np.flatnonzero(gear[: joint.nv]) if gear.size > 1 else np.arange(joint.nv)
         for axis in axes:
             limit[joint.idx_v + axis] = bound
@@ -165,6 +165,14 @@ def _default_contacts(root: ET.Element, model: pin.Model) -> list[ContactSpec]:
     return specs
 
 
+def _mjcf_root_body_position(root: ET.Element) -> np.ndarray:
+    """``pos`` of the first body under ``<worldbody>`` (zero if none)."""
+    body = root.find("./worldbody/body")
+    if body is None:
+        return np.zeros(3)
+    return np.array([float(x) for x in body.get("pos", "0 0 0").split()])
+
+
 def _build_pinocchio(path: Path, fmt: str) -> pin.Model:
     """Parse with Pinocchio, adding a free-flyer root where the file has none."""
     try:
@@ -172,8 +180,9 @@ def _build_pinocchio(path: Path, fmt: str) -> pin.Model:
             return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
         model = pin.buildModelFromMJCF(str(path))
         if model.njoints < 2 or model.joints[1].shortname() != "JointModelFreeFlyer":
-            built = pin.buildModelFromMJCF(str(path), pin.JointModelFreeFlyer(), "root")
-            model = built[0] if isinstance(built, tuple) else built
+            model, _ = pin.buildModelAndLegacyConstraintsFromMJCF(
+                str(path), pin.JointModelFreeFlyer(), "root"
+            )
     except (RuntimeError, ValueError, IndexError) as exc:
         raise ModelError(f"Pinocchio could not parse the {fmt.upper()} file: {exc}") from None
     return model
@@ -220,7 +229,7 @@ def _joint_infos(model: pin.Model, torque_limit: np.ndarray) -> tuple[JointInfo,
 
 def _hash(text: bytes, contacts: list[ContactSpec]) -> str:
     digest = hashlib.sha256(text)
-    digest.update(json.dumps([c.model_dump() for c in contacts], sort_keys=True).encode())
+    digest.update(_contacts_json(contacts).encode())
     return digest.hexdigest()
 
 
@@ -262,14 +271,21 @@ def load_robot_model(
             model_format = "urdf"
     else:
         raise ModelError("no model given: set `model` or `model_text`")
-    frozen_contacts = tuple(contacts) if contacts is not None else None
-    return _load_cached(text, name, model_format, frozen_contacts)
+    contacts_json = None if contacts is None else _contacts_json(contacts)
+    return _load_cached(text, name, model_format, contacts_json)
+
+
+def _contacts_json(contacts: list[ContactSpec]) -> str:
+    return json.dumps([c.model_dump() for c in contacts], sort_keys=True)
 
 
 @cache
-def _load_cached(
-    text: bytes, name: str, fmt: str, contacts: tuple[ContactSpec, ...] | None
-) -> RobotModel:
+def _load_cached(text: bytes, name: str, fmt: str, contacts_json: str | None) -> RobotModel:
+    contacts = (
+        None
+        if contacts_json is None
+        else [ContactSpec.model_validate(c) for c in json.loads(contacts_json)]
+    )
     # Pinocchio parses files, so the text goes through a private temporary file.
     with tempfile.TemporaryDirectory(prefix="poise-model-") as tmp:
         path = Path(tmp) / f"model.{'urdf' if fmt == 'urdf' else 'xml'}"
@@ -283,13 +299,15 @@ def _load_cached(
     standing_position = model.jointPlacements[1].translation.copy()
     if "qpos0" in model.referenceConfigurations:
         standing_position += model.referenceConfigurations["qpos0"][:3]
-    standing_position.setflags(write=False)
     model.jointPlacements[1] = pin.SE3.Identity()
     if fmt == "mjcf":
         try:
             root = ET.fromstring(text)
         except ET.ParseError as exc:
             raise ModelError(f"invalid XML: {exc}") from None
+        if root.find(".//freejoint") is None:
+            # Pinocchio drops the root body's position when it adds the free flyer.
+            standing_position = standing_position + _mjcf_root_body_position(root)
         torque_limit = _mjcf_torque_limits(root, model)
         specs = list(contacts) if contacts is not None else _default_contacts(root, model)
     else:
@@ -303,6 +321,7 @@ def _load_cached(
         )
     model.effortLimit[6:] = torque_limit
     torque_limit.setflags(write=False)
+    standing_position.setflags(write=False)
     resolved = tuple(_resolve(spec, model) for spec in specs)
     return RobotModel(
         name=name,

@@ -1,0 +1,86 @@
+"""Valid sample messages of every type, shared by protocol and server tests."""
+
+import numpy as np
+
+from protocol.errors import ErrorCode
+from protocol.messages import (
+    Bye,
+    Command,
+    ContactSpec,
+    Diagnostics,
+    Error,
+    Hello,
+    JointInfo,
+    Params,
+    SessionStats,
+    SetParams,
+    State,
+    Stats,
+    Welcome,
+)
+
+CONTACT = ContactSpec(name="left_foot", frame="left_sole", points_in_frame=[(0.1, 0.05, 0.0)])
+
+
+def sample_messages():
+    """One valid instance of every message type."""
+    return [
+        Hello(seq=1, model="thesis_humanoid", params={"stiffness": 50.0}),
+        Welcome(
+            seq=1,
+            session_id="abc",
+            model_name="m",
+            model_hash="0" * 64,
+            total_mass=65.0,
+            standing_position_base_in_world=(0.0, 0.0, 1.0),
+            joints=[
+                JointInfo(
+                    name="knee", kind="revolute", nq=1, nv=1, torque_limit=[100.0],
+                    position_lower=[0.0], position_upper=[2.0],
+                )
+            ],
+            contacts=[CONTACT],
+            controller="tracking",
+            params={"stiffness": 50.0, "qp_solver": "daqp", "reference": [0.0, 1.0]},
+        ),
+        State(
+            seq=2,
+            time_s=0.5,
+            joint_position=[0.1, 0.2],
+            joint_velocity=np.array([0.3, -0.4]),
+            position_base_in_world=[0.0, 0.0, 1.0],
+            orientation_base_in_world_xyzw=[0.0, 0.0, 0.0, 1.0],
+            linear_velocity_base_in_world=[0.0, 0.0, 0.0],
+            angular_velocity_base_in_base=[0.0, 0.0, 0.0],
+            contact_flags=[True, False],
+        ),
+        Command(
+            seq=2,
+            joint_acceleration=[1.0, 2.0],
+            base_linear_acceleration_in_world=[0.0, 0.0, 0.0],
+            base_angular_acceleration_in_base=[0.0, 0.0, 0.0],
+            joint_torque=[3.0, 4.0],
+            contact_force_in_world=np.zeros(6),
+            diagnostics=Diagnostics(
+                compute_time_s=1e-3,
+                position_com_in_world=[0.0, 0.0, 0.9],
+                kkt_condition_number=10.0,
+                root_wrench_residual=0.0,
+                saturated_joints=0,
+            ),
+        ),
+        SetParams(seq=3, params={"stiffness": 10.0}),
+        Params(seq=3, params={"stiffness": 10.0}),
+        Stats(seq=4),
+        Stats(
+            seq=4,
+            sessions=[
+                SessionStats(
+                    session_id="abc", model_name="m", controller="tracking", ticks=3, errors=0,
+                    compute_time_p50_s=1e-3, compute_time_p99_s=2e-3, idle_s=0.1,
+                )
+            ],
+        ),
+        Bye(seq=5),
+        Error(seq=6, code=ErrorCode.BAD_SHAPE, field="joint_position", detail="expected 3"),
+    ]
