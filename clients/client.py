@@ -109,6 +109,11 @@ class ControllerClient:
         )
         return self._handshake()
 
+    @property
+    def last_seq(self) -> int:
+        """``seq`` of the last request sent (its reply echoes it)."""
+        return self._seq
+
     def step(self, state: State) -> Command:
         """Send one state and return the command for it (``seq`` is set here)."""
         return self._request(state, Command)
@@ -176,7 +181,10 @@ class ControllerClient:
                 raise ServerError(reply.code, reply.field, reply.detail, reply.seq)
             if not isinstance(reply, reply_type):
                 raise ServerError(
-                    ErrorCode.UNEXPECTED_MESSAGE, "type", f"expected {reply_type.__name__}, got {reply.type!r}", seq
+                    ErrorCode.UNEXPECTED_MESSAGE,
+                    "type",
+                    f"expected {reply_type.__name__}, got {reply.type!r}",
+                    seq,
                 )
             return reply
         self._needs_reconnect = True

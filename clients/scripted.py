@@ -65,8 +65,12 @@ def integrate(
             joint_position[q_slice] = _rotate_local(joint_position[q_slice], step)
         else:
             joint_position[q_slice] += step
-    linear_velocity = state.linear_velocity_base_in_world + dt_s * command.base_linear_acceleration_in_world
-    angular_velocity = state.angular_velocity_base_in_base + dt_s * command.base_angular_acceleration_in_base
+    linear_velocity = (
+        state.linear_velocity_base_in_world + dt_s * command.base_linear_acceleration_in_world
+    )
+    angular_velocity = (
+        state.angular_velocity_base_in_base + dt_s * command.base_angular_acceleration_in_base
+    )
     return KinematicState(
         joint_position=joint_position,
         joint_velocity=joint_velocity,
@@ -146,7 +150,9 @@ def run_scripted(
         run.time_s.append(time_s)
         run.pose_error_rad.append(_pose_error(state.joint_position, neutral, joints))
         run.joint_torque.append(command.joint_torque)
-        run.vertical_force_N.append(float(command.contact_force_in_world.reshape(-1, 3)[:, 2].sum()))
+        run.vertical_force_N.append(
+            float(command.contact_force_in_world.reshape(-1, 3)[:, 2].sum())
+        )
         run.position_com_in_world.append(command.diagnostics.position_com_in_world)
         run.compute_time_s.append(command.diagnostics.compute_time_s)
         state = integrate(state, command, joints, dt_s)
@@ -157,7 +163,9 @@ def _pose_error(position: np.ndarray, reference: np.ndarray, joints: list[JointI
     errors = []
     for joint, (q_slice, _) in zip(joints, joint_slices(joints).values(), strict=True):
         if joint.kind == "ball":
-            relative = Rotation.from_quat(reference[q_slice]).inv() * Rotation.from_quat(position[q_slice])
+            relative = Rotation.from_quat(reference[q_slice]).inv() * Rotation.from_quat(
+                position[q_slice]
+            )
             errors.append(relative.magnitude())
         else:
             errors.extend(np.abs(position[q_slice] - reference[q_slice]))

@@ -33,7 +33,14 @@ class ServerProcess:
         extra_args: Sequence[str] = (),
         start_timeout_s: float = 60.0,
     ):
-        self.command = [sys.executable, "-m", "controller_server.cli", "--log-level", "WARNING", "serve"]
+        self.command = [
+            sys.executable,
+            "-m",
+            "controller_server.cli",
+            "--log-level",
+            "WARNING",
+            "serve",
+        ]
         for endpoint in bind:
             self.command += ["--bind", endpoint]
         self.command += list(extra_args)
@@ -49,7 +56,10 @@ class ServerProcess:
     def start(self) -> ServerProcess:
         """Start the process and wait until it listens."""
         self.process = subprocess.Popen(
-            self.command, stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"}
+            self.command,
+            stdout=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
         deadline = time.monotonic() + self.start_timeout_s
         assert self.process.stdout is not None

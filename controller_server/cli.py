@@ -21,7 +21,9 @@ DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
 def _serve(args: argparse.Namespace) -> int:
     from controller_server.server import ControllerServer
 
-    server = ControllerServer(args.bind or [DEFAULT_ENDPOINT], session_timeout_s=args.session_timeout)
+    server = ControllerServer(
+        args.bind or [DEFAULT_ENDPOINT], session_timeout_s=args.session_timeout
+    )
 
     def request_stop(signum: int, _frame: object) -> None:
         logging.getLogger("poise.server").info("signal %d: shutting down", signum)
@@ -39,37 +41,51 @@ def _demo(args: argparse.Namespace) -> int:
     from clients.demo import run_demo
 
     return run_demo(
-        model=args.model, output_dir=Path(args.output), duration_s=args.duration, endpoint=args.connect
+        model=args.model,
+        output_dir=Path(args.output),
+        duration_s=args.duration,
+        endpoint=args.connect,
     )
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``poise`` (also used to document the CLI)."""
     parser = argparse.ArgumentParser(
-        prog="poise", description="Poise: whole-body balance control for bipeds, served over ZeroMQ."
+        prog="poise",
+        description="Poise: whole-body balance control for bipeds, served over ZeroMQ.",
     )
     parser.add_argument(
-        "--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        "--log-level",
+        default="INFO",
+        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
         help="logging verbosity (default: INFO)",
     )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     serve = commands.add_parser(
-        "serve", help="run the controller server",
+        "serve",
+        help="run the controller server",
         description="Serve whole-body controllers: one session per client, state in, command out.",
     )
     serve.add_argument(
-        "--bind", action="append", metavar="ENDPOINT",
-        help=f"ZeroMQ endpoint to bind, tcp:// or ipc://; repeat for several (default: {DEFAULT_ENDPOINT})",
+        "--bind",
+        action="append",
+        metavar="ENDPOINT",
+        help="ZeroMQ endpoint to bind, tcp:// or ipc://; repeat for several "
+        f"(default: {DEFAULT_ENDPOINT}; port * picks a free one)",
     )
     serve.add_argument(
-        "--session-timeout", type=float, default=30.0, metavar="SECONDS",
+        "--session-timeout",
+        type=float,
+        default=30.0,
+        metavar="SECONDS",
         help="drop a session after this long without a request (default: 30)",
     )
     serve.set_defaults(handler=_serve)
 
     demo = commands.add_parser(
-        "demo", help="start a server and run the demo client, write a plot",
+        "demo",
+        help="start a server and run the demo client, write a plot",
         description="Start `poise serve` on a free loopback port, run the scripted client against "
         "it, and write a PNG plot and a JSON summary.",
     )
@@ -77,13 +93,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--model", default="thesis_humanoid", help="built-in model (default: thesis_humanoid)"
     )
     demo.add_argument(
-        "--output", default="out", metavar="DIR", help="directory for demo.png and demo.json (default: out)"
+        "--output",
+        default="out",
+        metavar="DIR",
+        help="directory for demo.png and demo.json (default: out)",
     )
     demo.add_argument(
         "--duration", type=float, default=2.0, metavar="SECONDS", help="simulated time (default: 2)"
     )
     demo.add_argument(
-        "--connect", default=None, metavar="ENDPOINT",
+        "--connect",
+        default=None,
+        metavar="ENDPOINT",
         help="use a running server at ENDPOINT instead of starting one",
     )
     demo.set_defaults(handler=_demo)

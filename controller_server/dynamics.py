@@ -109,9 +109,13 @@ def compute_dynamics_terms(
 
         offsets_in_world = contact.points_in_frame @ data.oMf[frame_id].rotation.T
         # v_p = v_o + ω × r  and  a_p = a_o + α × r + ω × (ω × r), all points at once.
-        angular_rows = np.broadcast_to(jacobian[3:].T, (len(offsets_in_world), *jacobian[3:].T.shape))
+        angular_rows = np.broadcast_to(
+            jacobian[3:].T, (len(offsets_in_world), *jacobian[3:].T.shape)
+        )
         lever_rows = cross(angular_rows, offsets_in_world[:, None, :])  # (k, nv, 3): J_ω × r
-        point_jacobians.append((jacobian[None, :3, :] + lever_rows.transpose(0, 2, 1)).reshape(-1, model.nv))
+        point_jacobians.append(
+            (jacobian[None, :3, :] + lever_rows.transpose(0, 2, 1)).reshape(-1, model.nv)
+        )
         omega = velocity.angular
         point_drifts.append(
             (

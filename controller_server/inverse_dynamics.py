@@ -151,7 +151,10 @@ def solve_inverse_dynamics(
         if solution is not None:
             contact_generalized_force = J_c.T @ solution
             support_points = np.concatenate(
-                [np.full(J.shape[0] // 3, on) for J, on in zip(terms.point_jacobians, supports, strict=True)]
+                [
+                    np.full(J.shape[0] // 3, on)
+                    for J, on in zip(terms.point_jacobians, supports, strict=True)
+                ]
             )
             forces[support_points] = solution.reshape(-1, 3)
 

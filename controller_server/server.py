@@ -64,7 +64,12 @@ class ControllerServer:
             session = self.sessions.get(identity)
             if session is not None:
                 session.errors += 1
-            return Error(seq=exc.seq if exc.seq >= 0 else seq, code=exc.code, field=exc.field, detail=exc.detail)
+            return Error(
+                seq=exc.seq if exc.seq >= 0 else seq,
+                code=exc.code,
+                field=exc.field,
+                detail=exc.detail,
+            )
         except Exception as exc:  # a controller bug must not take the server down
             log.exception("internal error while serving %r", identity)
             return Error(seq=seq, code=ErrorCode.INTERNAL, detail=f"{type(exc).__name__}: {exc}")
@@ -78,14 +83,19 @@ class ControllerServer:
                 raise
             self.sessions[identity] = session
             log.info(
-                "session %s: model %s, controller %s", session.session_id[:8], session.robot.name,
+                "session %s: model %s, controller %s",
+                session.session_id[:8],
+                session.robot.name,
                 session.controller.name,
             )
             return session.welcome(request.seq)
         if isinstance(request, Stats):
             if request.sessions is not None:
                 raise ProtocolError(
-                    ErrorCode.UNEXPECTED_MESSAGE, "sessions", "a stats request carries no sessions", request.seq
+                    ErrorCode.UNEXPECTED_MESSAGE,
+                    "sessions",
+                    "a stats request carries no sessions",
+                    request.seq,
                 )
             now = time.monotonic()
             return Stats(seq=request.seq, sessions=[s.stats(now) for s in self.sessions.values()])
@@ -99,7 +109,10 @@ class ControllerServer:
         session = self.sessions.get(identity)
         if session is None:
             raise ProtocolError(
-                ErrorCode.NO_SESSION, "type", "no session for this client: send hello first", request.seq
+                ErrorCode.NO_SESSION,
+                "type",
+                "no session for this client: send hello first",
+                request.seq,
             )
         session.last_seen_s = time.monotonic()
         if isinstance(request, Bye):

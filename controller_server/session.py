@@ -36,7 +36,10 @@ class Session:
             model_format=hello.model_format,
             contacts=hello.contacts,
         )
-        if hello.expected_model_hash is not None and hello.expected_model_hash != self.robot.model_hash:
+        if (
+            hello.expected_model_hash is not None
+            and hello.expected_model_hash != self.robot.model_hash
+        ):
             raise ProtocolError(
                 ErrorCode.MODEL_MISMATCH,
                 "expected_model_hash",

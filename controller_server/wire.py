@@ -26,7 +26,10 @@ MIN_QUATERNION_NORM = 1e-6
 def _check_length(field: str, array: np.ndarray, expected: int, seq: int) -> None:
     if array.size != expected:
         raise ProtocolError(
-            ErrorCode.BAD_SHAPE, field, f"expected {expected} values for this robot, got {array.size}", seq
+            ErrorCode.BAD_SHAPE,
+            field,
+            f"expected {expected} values for this robot, got {array.size}",
+            seq,
         )
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from pydantic import BeforeValidator, PlainSerializer, WithJsonSchema
 from pydantic_core import PydanticCustomError
 
-__all__ = ["FiniteArray", "FloatArray", "Vector3", "QuaternionXYZW", "array_to_bytes"]
+__all__ = ["FiniteArray", "FloatArray", "QuaternionXYZW", "Vector3", "array_to_bytes"]
 
 WIRE_DTYPE = np.dtype("<f8")
 

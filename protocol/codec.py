@@ -53,9 +53,7 @@ def decode(data: bytes) -> Message:
             ErrorCode.MALFORMED, "", f"message of {len(data)} bytes exceeds {MAX_MESSAGE_BYTES}"
         )
     try:
-        payload = msgpack.unpackb(
-            data, raw=False, strict_map_key=True
-        )
+        payload = msgpack.unpackb(data, raw=False, strict_map_key=True)
     except Exception as exc:  # msgpack raises many unrelated types on garbage
         raise ProtocolError(
             ErrorCode.MALFORMED, "", f"not a msgpack message ({type(exc).__name__}: {exc})"

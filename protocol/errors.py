@@ -20,7 +20,7 @@ class ErrorCode(IntEnum):
 
     description: str
 
-    def __new__(cls, value: int, description: str) -> ErrorCode:
+    def __new__(cls, value: int, description: str) -> ErrorCode:  # noqa: D102
         member = int.__new__(cls, value)
         member._value_ = value
         member.description = description
@@ -57,7 +57,7 @@ class ProtocolError(PoiseError):
     """
 
     def __init__(self, code: ErrorCode, field: str, detail: str, seq: int = -1):
-        self.code = ErrorCode(code)
+        self.code = code
         self.field = field
         self.detail = detail
         self.seq = seq

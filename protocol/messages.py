@@ -77,7 +77,10 @@ class ContactSpec(_Strict):
     frame: str = wire_field("Model frame the points are expressed in, e.g. `left_sole`.")
     points_in_frame: list[tuple[float, float, float]] = wire_field(
         "Contact points: the corners of the sole rectangle.",
-        shape="k × 3", unit="m", frame="`frame`", min_length=1,
+        shape="k × 3",
+        unit="m",
+        frame="`frame`",
+        min_length=1,
     )
     friction_coefficient: float = wire_field(
         "Coulomb friction coefficient μ.", unit="1", default=0.8, gt=0.0, le=10.0
@@ -102,7 +105,8 @@ class Hello(Message):
     )
     model_text: str | None = wire_field(
         "Model file text sent by the client (instead of `model`).",
-        default=None, max_length=8_000_000,
+        default=None,
+        max_length=8_000_000,
     )
     model_format: Literal["mjcf", "urdf"] = wire_field(
         "Format of `model_text` (a `model` path ending in `.urdf` is URDF).", default="mjcf"
@@ -155,7 +159,9 @@ class Welcome(Message):
     total_mass: float = wire_field("Total mass.", unit="kg")
     standing_position_base_in_world: tuple[float, float, float] = wire_field(
         "Base position at which the neutral pose stands with its soles on z = 0.",
-        shape="3", unit="m", frame="world",
+        shape="3",
+        unit="m",
+        frame="world",
     )
     joints: list[JointInfo] = wire_field("Actuated joints in wire order (see JointInfo).")
     contacts: list[ContactSpec] = wire_field("Contacts in `contact_flags` order.")
@@ -170,11 +176,15 @@ class State(Message):
     time_s: float = wire_field("Client time.", unit="s", allow_inf_nan=False)
     joint_position: FiniteArray = wire_field(
         "Joint positions in wire order; a ball joint is a quaternion xyzw of child in parent.",
-        shape="Σ nq", unit="rad (m)", frame="joint",
+        shape="Σ nq",
+        unit="rad (m)",
+        frame="joint",
     )
     joint_velocity: FiniteArray = wire_field(
         "Joint velocities in wire order; a ball joint's is in its child frame.",
-        shape="Σ nv", unit="rad/s (m/s)", frame="joint",
+        shape="Σ nv",
+        unit="rad/s (m/s)",
+        frame="joint",
     )
     position_base_in_world: Vector3 = wire_field(
         "Base (root body) origin.", shape="3", unit="m", frame="world"
@@ -223,13 +233,17 @@ class Command(Message):
         "Base angular acceleration.", shape="3", unit="rad/s²", frame="base"
     )
     joint_torque: FloatArray = wire_field(
-        "Joint torques in wire order, within the limits.", shape="Σ nv", unit="N·m (N)",
+        "Joint torques in wire order, within the limits.",
+        shape="Σ nv",
+        unit="N·m (N)",
         frame="joint",
     )
     contact_force_in_world: FloatArray = wire_field(
         "Force at each contact point (contacts in welcome order, points in order); zero "
         "at contacts that are not supports.",
-        shape="Σ k × 3", unit="N", frame="world",
+        shape="Σ k × 3",
+        unit="N",
+        frame="world",
     )
     diagnostics: Diagnostics = wire_field("See the Diagnostics table.")
 
@@ -256,7 +270,9 @@ class SessionStats(_Strict):
     controller: str = wire_field("Controller of the session.")
     ticks: int = wire_field("`state` messages answered with a `command`.")
     errors: int = wire_field("Requests of this client answered with an `error`.")
-    compute_time_p50_s: float = wire_field("Median compute time over the last 1000 ticks.", unit="s")
+    compute_time_p50_s: float = wire_field(
+        "Median compute time over the last 1000 ticks.", unit="s"
+    )
     compute_time_p99_s: float = wire_field("99th-percentile compute time, same window.", unit="s")
     idle_s: float = wire_field("Time since the session's last request.", unit="s")
 
@@ -282,7 +298,9 @@ class Error(Message):
     type: Literal["error"] = "error"
     seq: int = wire_field("Seq of the bad request, -1 if it was unreadable.", default=-1, ge=-1)
     code: ErrorCode = wire_field("Error code (see the error table).")
-    field: str = wire_field("Dotted path of the offending key, `\"\"` for the whole message.", default="")
+    field: str = wire_field(
+        'Dotted path of the offending key, `""` for the whole message.', default=""
+    )
     detail: str = wire_field("What is wrong, with the bad value.")
 
 

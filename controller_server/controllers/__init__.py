@@ -3,7 +3,7 @@
 from collections.abc import Mapping
 from typing import Any
 
-from controller_server.controllers.base import ControlInput, ControlOutput, Controller, ParamSpec
+from controller_server.controllers.base import ControlInput, Controller, ControlOutput, ParamSpec
 from controller_server.controllers.tracking import TrackingController
 from controller_server.models import RobotModel
 from protocol.errors import ErrorCode, ProtocolError
@@ -33,6 +33,8 @@ def create_controller(
     cls = CONTROLLERS.get(name)
     if cls is None:
         raise ProtocolError(
-            ErrorCode.UNKNOWN_CONTROLLER, "controller", f"{name=!r}; available: {sorted(CONTROLLERS)}"
+            ErrorCode.UNKNOWN_CONTROLLER,
+            "controller",
+            f"{name=!r}; available: {sorted(CONTROLLERS)}",
         )
     return cls(robot, params)

@@ -92,9 +92,7 @@ class Controller(ABC):
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self.robot = robot
-        self._params: dict[str, Any] = {
-            key: self.default_value(key) for key in self.PARAMETERS
-        }
+        self._params: dict[str, Any] = {key: self.default_value(key) for key in self.PARAMETERS}
         self.set_params(params or {})
 
     def default_value(self, key: str) -> Any:

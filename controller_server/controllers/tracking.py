@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.constraints import compute_support_equalities
-from controller_server.controllers.base import ControlInput, ControlOutput, Controller, ParamSpec
+from controller_server.controllers.base import ControlInput, Controller, ControlOutput, ParamSpec
 from controller_server.dynamics import compute_dynamics_terms
 from controller_server.errors import InvalidParams
 from controller_server.features import compute_tracking_objective
@@ -48,7 +48,10 @@ class TrackingController(Controller):
             None, kind="vector", doc="reference pose, wire joint order (rad; ball: xyzw)"
         ),
         "reference_base_orientation_xyzw": ParamSpec(
-            [0.0, 0.0, 0.0, 1.0], kind="vector", minimum=-1.0, maximum=1.0,
+            [0.0, 0.0, 0.0, 1.0],
+            kind="vector",
+            minimum=-1.0,
+            maximum=1.0,
             doc="reference root orientation in world, scalar last",
         ),
         "regularization": ParamSpec(
@@ -58,7 +61,9 @@ class TrackingController(Controller):
             1e-6, minimum=1e-12, maximum=1.0, doc="ε on ‖f‖² in force distribution (1/N²)"
         ),
         "qp_solver": ParamSpec(
-            "daqp", kind="choice", choices=("daqp", "quadprog", "proxqp"),
+            "daqp",
+            kind="choice",
+            choices=("daqp", "quadprog", "proxqp"),
             doc="QP solver for contact forces (via qpsolvers)",
         ),
     }
@@ -95,9 +100,15 @@ class TrackingController(Controller):
         q, v = control_input.q, control_input.v
         terms = compute_dynamics_terms(self.robot, self._data, q, v)
 
-        q_ref = np.concatenate([q[:3], p["reference_base_orientation_xyzw"], p["reference_joint_position"]])
+        q_ref = np.concatenate(
+            [q[:3], p["reference_base_orientation_xyzw"], p["reference_joint_position"]]
+        )
         weight = np.concatenate(
-            [np.zeros(3), np.full(3, p["weight_root_orientation"]), np.full(model.nv - 6, p["weight_joints"])]
+            [
+                np.zeros(3),
+                np.full(3, p["weight_root_orientation"]),
+                np.full(model.nv - 6, p["weight_joints"]),
+            ]
         )
         zeros = np.zeros(model.nv)
         tracking = compute_tracking_objective(

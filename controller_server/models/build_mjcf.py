@@ -120,8 +120,11 @@ def water_box_m(mass_kg: float, x_m: float | None, y_m: float | None, z_m: float
 def box_inertia_kgm2(mass_kg: float, size_m: Vec3) -> Vec3:
     """Return the principal moments of a solid box of full extents ``size_m`` about its center."""
     a, b, c = size_m
-    return (mass_kg * (b * b + c * c) / 12, mass_kg * (a * a + c * c) / 12,
-            mass_kg * (a * a + b * b) / 12)
+    return (
+        mass_kg * (b * b + c * c) / 12,
+        mass_kg * (a * a + c * c) / 12,
+        mass_kg * (a * a + b * b) / 12,
+    )
 
 
 def pitch_quat(angle_rad: float) -> tuple[float, float, float, float]:
@@ -148,22 +151,30 @@ def _render_body(body: Body, depth: int, lines: list[str], joints: list[Joint]) 
     else:
         joints.append(joint)
         axis = f' axis="{_fmt(*joint.axis)}"' if joint.kind == "hinge" else ""
-        lines.append(f'{inner}<joint name="{joint.name}" type="{joint.kind}"{axis} '
-                     f'limited="true" range="{_fmt(*joint.range_rad)}"/>')
+        lines.append(
+            f'{inner}<joint name="{joint.name}" type="{joint.kind}"{axis} '
+            f'limited="true" range="{_fmt(*joint.range_rad)}"/>'
+        )
     half_m = tuple(v / 2 for v in body.size_m)
     inertia = box_inertia_kgm2(body.mass_kg, body.size_m)
-    lines.append(f'{inner}<inertial pos="{_fmt(*body.center_m)}" mass="{_fmt(body.mass_kg)}" '
-                 f'diaginertia="{_fmt(*inertia)}"/>')
+    lines.append(
+        f'{inner}<inertial pos="{_fmt(*body.center_m)}" mass="{_fmt(body.mass_kg)}" '
+        f'diaginertia="{_fmt(*inertia)}"/>'
+    )
     friction = f' friction="{FOOT_FRICTION}"' if body.sole else ""
     rgba = "0.25 0.25 0.3 1" if body.sole else "0.7 0.7 0.75 1"
-    lines.append(f'{inner}<geom name="{body.name}_box" type="box" size="{_fmt(*half_m)}" '
-                 f'pos="{_fmt(*body.center_m)}" contype="1" conaffinity="0"{friction} '
-                 f'rgba="{rgba}"/>')
+    lines.append(
+        f'{inner}<geom name="{body.name}_box" type="box" size="{_fmt(*half_m)}" '
+        f'pos="{_fmt(*body.center_m)}" contype="1" conaffinity="0"{friction} '
+        f'rgba="{rgba}"/>'
+    )
     if body.sole:  # the site is the bottom face of the foot box
         (cx, cy, cz), (hx, hy, hz) = body.center_m, half_m
         site = body.name.replace("_foot", "_sole")
-        lines.append(f'{inner}<site name="{site}" type="box" pos="{_fmt(cx, cy, cz - hz)}" '
-                     f'size="{_fmt(hx, hy, SOLE_HALF_THICKNESS_M)}"/>')
+        lines.append(
+            f'{inner}<site name="{site}" type="box" pos="{_fmt(cx, cy, cz - hz)}" '
+            f'size="{_fmt(hx, hy, SOLE_HALF_THICKNESS_M)}"/>'
+        )
     for child in body.children:
         _render_body(child, depth + 1, lines, joints)
     lines.append(f"{pad}</body>")
@@ -190,8 +201,10 @@ def render(model_name: str, root: Body) -> str:
             lines.append(f'    <motor name="{joint.name}" joint="{joint.name}" gear="1" {limit}/>')
         else:
             for axis, gear in (("x", "1 0 0 0 0 0"), ("y", "0 1 0 0 0 0"), ("z", "0 0 1 0 0 0")):
-                lines.append(f'    <motor name="{joint.name}_{axis}" joint="{joint.name}" '
-                             f'gear="{gear}" {limit}/>')
+                lines.append(
+                    f'    <motor name="{joint.name}_{axis}" joint="{joint.name}" '
+                    f'gear="{gear}" {limit}/>'
+                )
     lines += ["  </actuator>", "</mujoco>", ""]
     return "\n".join(lines)
 
@@ -215,10 +228,24 @@ DE_LEVA_MALE = {
     "shank": (0.0433, 0.4340),  # knee joint center - lateral malleolus
     "foot": (0.0137, 0.2581),  # heel - toe tip
 }
-THESIS_TORQUE_NM = {"back": 200.0, "neck": 40.0, "shoulder": 80.0, "elbow": 50.0, "hip": 250.0,
-                    "knee": 250.0, "ankle": 150.0}
-THESIS_SWING_RAD = {"back": 0.6, "neck": 1.0, "shoulder": 2.6, "elbow": 2.5, "hip": 1.8,
-                    "knee": 2.4, "ankle": 0.8}
+THESIS_TORQUE_NM = {
+    "back": 200.0,
+    "neck": 40.0,
+    "shoulder": 80.0,
+    "elbow": 50.0,
+    "hip": 250.0,
+    "knee": 250.0,
+    "ankle": 150.0,
+}
+THESIS_SWING_RAD = {
+    "back": 0.6,
+    "neck": 1.0,
+    "shoulder": 2.6,
+    "elbow": 2.5,
+    "hip": 1.8,
+    "knee": 2.4,
+    "ankle": 0.8,
+}
 
 
 def _segment(name: str) -> tuple[float, float]:
@@ -236,11 +263,14 @@ def build_thesis_humanoid() -> Body:
     tq, sw = THESIS_TORQUE_NM, THESIS_SWING_RAD
     hip_y_m, foot_breadth_m = 0.0875, round(0.055 * THESIS_STATURE_M, 4)
     (pelvis_kg, pelvis_m), (abdomen_kg, abdomen_m), (chest_kg, chest_m), (head_kg, head_m) = (
-        _segment(n) for n in ("lower_trunk", "mid_trunk", "upper_trunk", "head"))
+        _segment(n) for n in ("lower_trunk", "mid_trunk", "upper_trunk", "head")
+    )
     (arm_kg, arm_m), (forearm_kg, forearm_m), (hand_kg, hand_m) = (
-        _segment(n) for n in ("upper_arm", "forearm", "hand"))
+        _segment(n) for n in ("upper_arm", "forearm", "hand")
+    )
     (thigh_kg, thigh_m), (shank_kg, shank_m), (foot_kg, foot_m) = (
-        _segment(n) for n in ("thigh", "shank", "foot"))
+        _segment(n) for n in ("thigh", "shank", "foot")
+    )
     thigh_width_m, trunk_width_m, shoulder_y_m = 0.13, 0.30, 0.20
     foot_size = water_box_m(foot_kg, foot_m, foot_breadth_m, None)
     foot_height_m = foot_size[2]
@@ -248,39 +278,93 @@ def build_thesis_humanoid() -> Body:
     def leg(sign: float) -> Body:
         s = _side(sign)
         # The ankle is a quarter of the foot length in front of the heel.
-        foot = Body(f"{s}_foot", (0, 0, -shank_m), foot_size, foot_kg,
-                    (0.25 * foot_m, 0, -foot_height_m / 2), _ball(f"{s}_ankle", "ankle", tq, sw),
-                    sole=True)
-        shin = Body(f"{s}_shin", (0, 0, -thigh_m), water_box_m(shank_kg, None, 0.08, shank_m),
-                    shank_kg, (0, 0, -shank_m / 2), _ball(f"{s}_knee", "knee", tq, sw), [foot])
-        return Body(f"{s}_thigh", (0, sign * hip_y_m, -pelvis_m / 2),
-                    water_box_m(thigh_kg, None, thigh_width_m, thigh_m), thigh_kg,
-                    (0, 0, -thigh_m / 2), _ball(f"{s}_hip", "hip", tq, sw), [shin])
+        foot = Body(
+            f"{s}_foot",
+            (0, 0, -shank_m),
+            foot_size,
+            foot_kg,
+            (0.25 * foot_m, 0, -foot_height_m / 2),
+            _ball(f"{s}_ankle", "ankle", tq, sw),
+            sole=True,
+        )
+        shin = Body(
+            f"{s}_shin",
+            (0, 0, -thigh_m),
+            water_box_m(shank_kg, None, 0.08, shank_m),
+            shank_kg,
+            (0, 0, -shank_m / 2),
+            _ball(f"{s}_knee", "knee", tq, sw),
+            [foot],
+        )
+        return Body(
+            f"{s}_thigh",
+            (0, sign * hip_y_m, -pelvis_m / 2),
+            water_box_m(thigh_kg, None, thigh_width_m, thigh_m),
+            thigh_kg,
+            (0, 0, -thigh_m / 2),
+            _ball(f"{s}_hip", "hip", tq, sw),
+            [shin],
+        )
 
     def arm(sign: float) -> Body:
         s = _side(sign)
         lower_m = forearm_m + hand_m
-        forearm = Body(f"{s}_forearm", (0, 0, -arm_m),
-                       water_box_m(forearm_kg + hand_kg, None, 0.065, lower_m),
-                       forearm_kg + hand_kg, (0, 0, -lower_m / 2),
-                       _ball(f"{s}_elbow", "elbow", tq, sw))
-        return Body(f"{s}_upper_arm", (0, sign * shoulder_y_m, chest_m - 0.03),
-                    water_box_m(arm_kg, None, 0.08, arm_m), arm_kg, (0, 0, -arm_m / 2),
-                    _ball(f"{s}_shoulder", "shoulder", tq, sw), [forearm])
+        forearm = Body(
+            f"{s}_forearm",
+            (0, 0, -arm_m),
+            water_box_m(forearm_kg + hand_kg, None, 0.065, lower_m),
+            forearm_kg + hand_kg,
+            (0, 0, -lower_m / 2),
+            _ball(f"{s}_elbow", "elbow", tq, sw),
+        )
+        return Body(
+            f"{s}_upper_arm",
+            (0, sign * shoulder_y_m, chest_m - 0.03),
+            water_box_m(arm_kg, None, 0.08, arm_m),
+            arm_kg,
+            (0, 0, -arm_m / 2),
+            _ball(f"{s}_shoulder", "shoulder", tq, sw),
+            [forearm],
+        )
 
-    head = Body("head", (0, 0, chest_m), water_box_m(head_kg, None, 0.15, head_m), head_kg,
-                (0, 0, head_m / 2), _ball("neck", "neck", tq, sw))
-    chest = Body("chest", (0, 0, abdomen_m), water_box_m(chest_kg, None, trunk_width_m, chest_m),
-                 chest_kg, (0, 0, chest_m / 2), _ball("upper_back", "back", tq, sw),
-                 [head, arm(1), arm(-1)])
-    abdomen = Body("abdomen", (0, 0, pelvis_m / 2),
-                   water_box_m(abdomen_kg, None, trunk_width_m, abdomen_m), abdomen_kg,
-                   (0, 0, abdomen_m / 2), _ball("lower_back", "back", tq, sw), [chest])
+    head = Body(
+        "head",
+        (0, 0, chest_m),
+        water_box_m(head_kg, None, 0.15, head_m),
+        head_kg,
+        (0, 0, head_m / 2),
+        _ball("neck", "neck", tq, sw),
+    )
+    chest = Body(
+        "chest",
+        (0, 0, abdomen_m),
+        water_box_m(chest_kg, None, trunk_width_m, chest_m),
+        chest_kg,
+        (0, 0, chest_m / 2),
+        _ball("upper_back", "back", tq, sw),
+        [head, arm(1), arm(-1)],
+    )
+    abdomen = Body(
+        "abdomen",
+        (0, 0, pelvis_m / 2),
+        water_box_m(abdomen_kg, None, trunk_width_m, abdomen_m),
+        abdomen_kg,
+        (0, 0, abdomen_m / 2),
+        _ball("lower_back", "back", tq, sw),
+        [chest],
+    )
     pelvis_z_m = foot_height_m + shank_m + thigh_m + pelvis_m / 2
     # Pelvis as wide as the two thighs side by side.
     pelvis_size = water_box_m(pelvis_kg, None, 2 * hip_y_m + thigh_width_m, pelvis_m)
-    return Body("pelvis", (0, 0, pelvis_z_m), pelvis_size, pelvis_kg, (0, 0, 0), None,
-                [abdomen, leg(1), leg(-1)])
+    return Body(
+        "pelvis",
+        (0, 0, pelvis_z_m),
+        pelvis_size,
+        pelvis_kg,
+        (0, 0, 0),
+        None,
+        [abdomen, leg(1), leg(-1)],
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -288,12 +372,18 @@ def build_thesis_humanoid() -> Body:
 # --------------------------------------------------------------------------------------------
 #: joint kind -> (torque limit N·m, left-side range rad). Right roll/yaw ranges are mirrored.
 REVOLUTE_JOINTS = {
-    "hip_yaw": (120.0, (-0.5, 0.8)), "hip_roll": (150.0, (-0.4, 0.8)),
-    "hip_pitch": (250.0, (-2.0, 0.6)), "knee": (300.0, (0.0, 2.4)),
-    "ankle_pitch": (150.0, (-0.7, 0.9)), "ankle_roll": (100.0, (-0.4, 0.4)),
-    "torso_yaw": (100.0, (-1.0, 1.0)), "neck_yaw": (20.0, (-1.2, 1.2)),
-    "shoulder_pitch": (80.0, (-3.0, 1.0)), "shoulder_roll": (80.0, (-0.2, 2.8)),
-    "shoulder_yaw": (60.0, (-1.5, 1.5)), "elbow": (40.0, (-2.5, 0.0)),
+    "hip_yaw": (120.0, (-0.5, 0.8)),
+    "hip_roll": (150.0, (-0.4, 0.8)),
+    "hip_pitch": (250.0, (-2.0, 0.6)),
+    "knee": (300.0, (0.0, 2.4)),
+    "ankle_pitch": (150.0, (-0.7, 0.9)),
+    "ankle_roll": (100.0, (-0.4, 0.4)),
+    "torso_yaw": (100.0, (-1.0, 1.0)),
+    "neck_yaw": (20.0, (-1.2, 1.2)),
+    "shoulder_pitch": (80.0, (-3.0, 1.0)),
+    "shoulder_roll": (80.0, (-0.2, 2.8)),
+    "shoulder_yaw": (60.0, (-1.5, 1.5)),
+    "elbow": (40.0, (-2.5, 0.0)),
 }
 X_AXIS, Y_AXIS, Z_AXIS = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
 
@@ -314,37 +404,121 @@ def build_revolute_humanoid() -> Body:
 
     def leg(sign: float) -> Body:
         s = _side(sign)
-        foot = Body(f"{s}_foot", (0, 0, 0), (0.24, 0.11, 0.04), 1.2, (0.05, 0, -0.05),
-                    _hinge("ankle_roll", X_AXIS, sign), sole=True)
-        ankle = Body(f"{s}_ankle_pitch_link", (0, 0, -shin_m), (0.06, 0.06, 0.06), 0.4,
-                     (0, 0, 0), _hinge("ankle_pitch", Y_AXIS, sign), [foot])
-        shin = Body(f"{s}_shin", (0, 0, -thigh_m), (0.09, 0.08, 0.37), 3.0, (0, 0, -0.185),
-                    _hinge("knee", Y_AXIS, sign), [ankle])
-        thigh = Body(f"{s}_thigh", (0, 0, 0), (0.11, 0.10, 0.37), 5.0, (0, 0, -0.215),
-                     _hinge("hip_pitch", Y_AXIS, sign), [shin])
-        roll = Body(f"{s}_hip_roll_link", (0, 0, -hip_drop_m), (0.10, 0.08, 0.06), 1.0,
-                    (0, 0, 0), _hinge("hip_roll", X_AXIS, sign), [thigh])
-        return Body(f"{s}_hip_yaw_link", (0, sign * 0.10, -pelvis_half_m), (0.08, 0.08, 0.06),
-                    0.8, (0, 0, -0.03), _hinge("hip_yaw", Z_AXIS, sign), [roll])
+        foot = Body(
+            f"{s}_foot",
+            (0, 0, 0),
+            (0.24, 0.11, 0.04),
+            1.2,
+            (0.05, 0, -0.05),
+            _hinge("ankle_roll", X_AXIS, sign),
+            sole=True,
+        )
+        ankle = Body(
+            f"{s}_ankle_pitch_link",
+            (0, 0, -shin_m),
+            (0.06, 0.06, 0.06),
+            0.4,
+            (0, 0, 0),
+            _hinge("ankle_pitch", Y_AXIS, sign),
+            [foot],
+        )
+        shin = Body(
+            f"{s}_shin",
+            (0, 0, -thigh_m),
+            (0.09, 0.08, 0.37),
+            3.0,
+            (0, 0, -0.185),
+            _hinge("knee", Y_AXIS, sign),
+            [ankle],
+        )
+        thigh = Body(
+            f"{s}_thigh",
+            (0, 0, 0),
+            (0.11, 0.10, 0.37),
+            5.0,
+            (0, 0, -0.215),
+            _hinge("hip_pitch", Y_AXIS, sign),
+            [shin],
+        )
+        roll = Body(
+            f"{s}_hip_roll_link",
+            (0, 0, -hip_drop_m),
+            (0.10, 0.08, 0.06),
+            1.0,
+            (0, 0, 0),
+            _hinge("hip_roll", X_AXIS, sign),
+            [thigh],
+        )
+        return Body(
+            f"{s}_hip_yaw_link",
+            (0, sign * 0.10, -pelvis_half_m),
+            (0.08, 0.08, 0.06),
+            0.8,
+            (0, 0, -0.03),
+            _hinge("hip_yaw", Z_AXIS, sign),
+            [roll],
+        )
 
     def arm(sign: float) -> Body:
         s = _side(sign)
-        forearm = Body(f"{s}_forearm", (0, 0, -0.25), (0.06, 0.06, 0.28), 1.2, (0, 0, -0.14),
-                       _hinge("elbow", Y_AXIS, sign))
-        upper = Body(f"{s}_upper_arm", (0, 0, 0), (0.07, 0.07, 0.22), 1.6, (0, 0, -0.14),
-                     _hinge("shoulder_yaw", Z_AXIS, sign), [forearm])
-        roll = Body(f"{s}_shoulder_roll_link", (0, 0, -0.08), (0.07, 0.07, 0.06), 0.5,
-                    (0, 0, 0), _hinge("shoulder_roll", X_AXIS, sign), [upper])
-        return Body(f"{s}_shoulder_pitch_link", (0, sign * 0.21, 0.36), (0.08, 0.06, 0.08), 0.6,
-                    (0, 0, 0), _hinge("shoulder_pitch", Y_AXIS, sign), [roll])
+        forearm = Body(
+            f"{s}_forearm",
+            (0, 0, -0.25),
+            (0.06, 0.06, 0.28),
+            1.2,
+            (0, 0, -0.14),
+            _hinge("elbow", Y_AXIS, sign),
+        )
+        upper = Body(
+            f"{s}_upper_arm",
+            (0, 0, 0),
+            (0.07, 0.07, 0.22),
+            1.6,
+            (0, 0, -0.14),
+            _hinge("shoulder_yaw", Z_AXIS, sign),
+            [forearm],
+        )
+        roll = Body(
+            f"{s}_shoulder_roll_link",
+            (0, 0, -0.08),
+            (0.07, 0.07, 0.06),
+            0.5,
+            (0, 0, 0),
+            _hinge("shoulder_roll", X_AXIS, sign),
+            [upper],
+        )
+        return Body(
+            f"{s}_shoulder_pitch_link",
+            (0, sign * 0.21, 0.36),
+            (0.08, 0.06, 0.08),
+            0.6,
+            (0, 0, 0),
+            _hinge("shoulder_pitch", Y_AXIS, sign),
+            [roll],
+        )
 
-    head = Body("head", (0, 0, 0.42), (0.16, 0.14, 0.18), 3.0, (0, 0, 0.11),
-                _hinge("neck_yaw", Z_AXIS))
-    torso = Body("torso", (0, 0, pelvis_half_m), (0.20, 0.34, 0.42), 17.0, (0, 0, 0.21),
-                 _hinge("torso_yaw", Z_AXIS), [head, arm(1), arm(-1)])
+    head = Body(
+        "head", (0, 0, 0.42), (0.16, 0.14, 0.18), 3.0, (0, 0, 0.11), _hinge("neck_yaw", Z_AXIS)
+    )
+    torso = Body(
+        "torso",
+        (0, 0, pelvis_half_m),
+        (0.20, 0.34, 0.42),
+        17.0,
+        (0, 0, 0.21),
+        _hinge("torso_yaw", Z_AXIS),
+        [head, arm(1), arm(-1)],
+    )
     pelvis_z_m = ankle_height_m + shin_m + thigh_m + hip_drop_m + pelvis_half_m
-    return Body("pelvis", (0, 0, pelvis_z_m), (0.16, 0.28, 2 * pelvis_half_m), 7.0, (0, 0, 0),
-                None, [torso, leg(1), leg(-1)])
+    return Body(
+        "pelvis",
+        (0, 0, pelvis_z_m),
+        (0.16, 0.28, 2 * pelvis_half_m),
+        7.0,
+        (0, 0, 0),
+        None,
+        [torso, leg(1), leg(-1)],
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -352,9 +526,16 @@ def build_revolute_humanoid() -> Body:
 # --------------------------------------------------------------------------------------------
 #: joint -> (torque limit N·m, max swing rad).
 DINO_JOINTS = {
-    "back": (300.0, 0.4), "neck_base": (100.0, 1.0), "neck_mid": (60.0, 1.0),
-    "neck_top": (30.0, 1.0), "tail_base": (200.0, 0.6), "tail_mid": (100.0, 0.8),
-    "tail_tip": (30.0, 0.8), "hip": (350.0, 1.6), "knee": (300.0, 2.4), "ankle": (150.0, 1.0),
+    "back": (300.0, 0.4),
+    "neck_base": (100.0, 1.0),
+    "neck_mid": (60.0, 1.0),
+    "neck_top": (30.0, 1.0),
+    "tail_base": (200.0, 0.6),
+    "tail_mid": (100.0, 0.8),
+    "tail_tip": (30.0, 0.8),
+    "hip": (350.0, 1.6),
+    "knee": (300.0, 2.4),
+    "ankle": (150.0, 1.0),
 }
 DINO_NECK_PITCH_RAD = 0.7  # the neck rises 0.7 rad above the horizontal; the head is level
 
@@ -371,34 +552,103 @@ def build_dino_biped() -> Body:
 
     def leg(sign: float) -> Body:
         s = _side(sign)
-        foot = Body(f"{s}_foot", (0, 0, -shin_m), (0.30, 0.14, foot_height_m), 1.5,
-                    (0.075, 0, -foot_height_m / 2), _dino_ball("ankle", sign), sole=True)
-        shin = Body(f"{s}_shin", (0, 0, -thigh_m), (0.10, 0.08, shin_m), 3.0,
-                    (0, 0, -shin_m / 2), _dino_ball("knee", sign), [foot])
-        return Body(f"{s}_thigh", (0, sign * 0.13, -pelvis_half_m), (0.12, 0.10, thigh_m), 5.0,
-                    (0, 0, -thigh_m / 2), _dino_ball("hip", sign), [shin])
+        foot = Body(
+            f"{s}_foot",
+            (0, 0, -shin_m),
+            (0.30, 0.14, foot_height_m),
+            1.5,
+            (0.075, 0, -foot_height_m / 2),
+            _dino_ball("ankle", sign),
+            sole=True,
+        )
+        shin = Body(
+            f"{s}_shin",
+            (0, 0, -thigh_m),
+            (0.10, 0.08, shin_m),
+            3.0,
+            (0, 0, -shin_m / 2),
+            _dino_ball("knee", sign),
+            [foot],
+        )
+        return Body(
+            f"{s}_thigh",
+            (0, sign * 0.13, -pelvis_half_m),
+            (0.12, 0.10, thigh_m),
+            5.0,
+            (0, 0, -thigh_m / 2),
+            _dino_ball("hip", sign),
+            [shin],
+        )
 
-    head = Body("head", (0.28, 0, 0), (0.32, 0.14, 0.14), 3.5, (0.16, 0, 0),
-                _dino_ball("neck_top"), quat=pitch_quat(DINO_NECK_PITCH_RAD))
-    neck_2 = Body("neck_2", (0.30, 0, 0), (0.28, 0.10, 0.10), 2.0, (0.14, 0, 0),
-                  _dino_ball("neck_mid"), [head])
-    neck_1 = Body("neck_1", (0.50, 0, 0.06), (0.30, 0.12, 0.12), 3.0, (0.15, 0, 0),
-                  _dino_ball("neck_base"), [neck_2], quat=pitch_quat(-DINO_NECK_PITCH_RAD))
-    trunk = Body("trunk", (0.17, 0, 0), (0.50, 0.30, 0.32), 18.0, (0.25, 0, 0),
-                 _dino_ball("back"), [neck_1])
-    tail_3 = Body("tail_3", (-0.45, 0, 0), (0.45, 0.07, 0.06), 2.0, (-0.225, 0, 0),
-                  _dino_ball("tail_tip"))
-    tail_2 = Body("tail_2", (-0.45, 0, 0), (0.45, 0.12, 0.10), 6.0, (-0.225, 0, 0),
-                  _dino_ball("tail_mid"), [tail_3])
-    tail_1 = Body("tail_1", (-0.17, 0, 0.03), (0.45, 0.18, 0.16), 10.0, (-0.225, 0, 0),
-                  _dino_ball("tail_base"), [tail_2])
+    head = Body(
+        "head",
+        (0.28, 0, 0),
+        (0.32, 0.14, 0.14),
+        3.5,
+        (0.16, 0, 0),
+        _dino_ball("neck_top"),
+        quat=pitch_quat(DINO_NECK_PITCH_RAD),
+    )
+    neck_2 = Body(
+        "neck_2",
+        (0.30, 0, 0),
+        (0.28, 0.10, 0.10),
+        2.0,
+        (0.14, 0, 0),
+        _dino_ball("neck_mid"),
+        [head],
+    )
+    neck_1 = Body(
+        "neck_1",
+        (0.50, 0, 0.06),
+        (0.30, 0.12, 0.12),
+        3.0,
+        (0.15, 0, 0),
+        _dino_ball("neck_base"),
+        [neck_2],
+        quat=pitch_quat(-DINO_NECK_PITCH_RAD),
+    )
+    trunk = Body(
+        "trunk", (0.17, 0, 0), (0.50, 0.30, 0.32), 18.0, (0.25, 0, 0), _dino_ball("back"), [neck_1]
+    )
+    tail_3 = Body(
+        "tail_3", (-0.45, 0, 0), (0.45, 0.07, 0.06), 2.0, (-0.225, 0, 0), _dino_ball("tail_tip")
+    )
+    tail_2 = Body(
+        "tail_2",
+        (-0.45, 0, 0),
+        (0.45, 0.12, 0.10),
+        6.0,
+        (-0.225, 0, 0),
+        _dino_ball("tail_mid"),
+        [tail_3],
+    )
+    tail_1 = Body(
+        "tail_1",
+        (-0.17, 0, 0.03),
+        (0.45, 0.18, 0.16),
+        10.0,
+        (-0.225, 0, 0),
+        _dino_ball("tail_base"),
+        [tail_2],
+    )
     pelvis_z_m = foot_height_m + shin_m + thigh_m + pelvis_half_m
-    return Body("pelvis", (0, 0, pelvis_z_m), (0.34, 0.28, 2 * pelvis_half_m), 10.0, (0, 0, 0),
-                None, [trunk, tail_1, leg(1), leg(-1)])
+    return Body(
+        "pelvis",
+        (0, 0, pelvis_z_m),
+        (0.34, 0.28, 2 * pelvis_half_m),
+        10.0,
+        (0, 0, 0),
+        None,
+        [trunk, tail_1, leg(1), leg(-1)],
+    )
 
 
-MODELS = {"thesis_humanoid": build_thesis_humanoid, "revolute_humanoid": build_revolute_humanoid,
-          "dino_biped": build_dino_biped}
+MODELS = {
+    "thesis_humanoid": build_thesis_humanoid,
+    "revolute_humanoid": build_revolute_humanoid,
+    "dino_biped": build_dino_biped,
+}
 
 
 def render_all() -> dict[str, str]:

@@ -135,7 +135,9 @@ def _mjcf_torque_limits(root: ET.Element, model: pin.Model) -> np.ndarray:
         if actuator.tag not in ("motor", "general") or joint_name is None:
             continue
         if not model.existJointName(joint_name):
-            raise ModelError(f"actuator {actuator.get('name')!r} drives unknown joint {joint_name!r}")
+            raise ModelError(
+                f"actuator {actuator.get('name')!r} drives unknown joint {joint_name!r}"
+            )
         joint = model.joints[model.getJointId(joint_name)]
         gear = np.array([float(g) for g in actuator.get("gear", "1").split()])
         bound = np.inf
@@ -160,7 +162,9 @@ def _default_contacts(root: ET.Element, model: pin.Model) -> list[ContactSpec]:
         half_x, half_y = (float(s) for s in site.get("size", "0 0 0").split()[:2])
         corners = [(sx * half_x, sy * half_y, 0.0) for sx in (1, -1) for sy in (1, -1)]
         specs.append(
-            ContactSpec(name=name.removesuffix("_sole") + "_foot", frame=name, points_in_frame=corners)
+            ContactSpec(
+                name=name.removesuffix("_sole") + "_foot", frame=name, points_in_frame=corners
+            )
         )
     return specs
 
@@ -286,6 +290,11 @@ def _load_cached(text: bytes, name: str, fmt: str, contacts_json: str | None) ->
         if contacts_json is None
         else [ContactSpec.model_validate(c) for c in json.loads(contacts_json)]
     )
+    # Well-formed XML first: the C++ parsers are not the place to find garbage.
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise ModelError(f"invalid XML: {exc}") from None
     # Pinocchio parses files, so the text goes through a private temporary file.
     with tempfile.TemporaryDirectory(prefix="poise-model-") as tmp:
         path = Path(tmp) / f"model.{'urdf' if fmt == 'urdf' else 'xml'}"
@@ -301,10 +310,6 @@ def _load_cached(text: bytes, name: str, fmt: str, contacts_json: str | None) ->
         standing_position += model.referenceConfigurations["qpos0"][:3]
     model.jointPlacements[1] = pin.SE3.Identity()
     if fmt == "mjcf":
-        try:
-            root = ET.fromstring(text)
-        except ET.ParseError as exc:
-            raise ModelError(f"invalid XML: {exc}") from None
         if root.find(".//freejoint") is None:
             # Pinocchio drops the root body's position when it adds the free flyer.
             standing_position = standing_position + _mjcf_root_body_position(root)

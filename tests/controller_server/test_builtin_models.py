@@ -81,12 +81,12 @@ def mj_to_pin_q(mjm: mujoco.MjModel, pm: pin.Model, qpos: np.ndarray) -> np.ndar
     for j in range(1, pm.njoints):
         jid = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_JOINT, pm.names[j])
         src, dst, nq = mjm.jnt_qposadr[jid], pm.idx_qs[j], pm.nqs[j]
-        block = qpos[src:src + nq].copy()
+        block = qpos[src : src + nq].copy()
         if nq == 7:  # free: (pos, w x y z) -> (pos, x y z w)
             block[3:] = np.roll(block[3:], -1)
         elif nq == 4:  # ball: (w x y z) -> (x y z w)
             block = np.roll(block, -1)
-        q[dst:dst + nq] = block
+        q[dst : dst + nq] = block
     return q
 
 
@@ -101,8 +101,10 @@ def convex_hull_2d(points: np.ndarray) -> np.ndarray:
     def half(seq: list[tuple[float, float]]) -> list[tuple[float, float]]:
         out: list[tuple[float, float]] = []
         for p in seq:
-            while len(out) >= 2 and cross_2d(np.subtract(out[-1], out[-2]),
-                                             np.subtract(p, out[-2])) <= 0:
+            while (
+                len(out) >= 2
+                and cross_2d(np.subtract(out[-1], out[-2]), np.subtract(p, out[-2])) <= 0
+            ):
                 out.pop()
             out.append(p)
         return out
@@ -219,8 +221,7 @@ def test_kinematics_agree_at_random_pose(file_name: str) -> None:
     for b in range(1, model.nbody):
         frame_id = pm.getFrameId(mj_name(model, mujoco.mjtObj.mjOBJ_BODY, b), pin.FrameType.BODY)
         np.testing.assert_allclose(pd.oMf[frame_id].translation, data.xpos[b], atol=TOL)
-        np.testing.assert_allclose(pd.oMf[frame_id].rotation, data.xmat[b].reshape(3, 3),
-                                   atol=TOL)
+        np.testing.assert_allclose(pd.oMf[frame_id].rotation, data.xmat[b].reshape(3, 3), atol=TOL)
 
 
 @pytest.mark.parametrize("file_name", MODEL_FILES)
@@ -255,8 +256,9 @@ def test_sole_site_is_bottom_face_of_foot_box(file_name: str) -> None:
         g = body_geom(model, body)
         half = model.geom_size[g]
         np.testing.assert_allclose(model.site_size[sid], [half[0], half[1], 0.001], atol=TOL)
-        np.testing.assert_allclose(model.site_pos[sid], model.geom_pos[g] - [0, 0, half[2]],
-                                   atol=TOL)
+        np.testing.assert_allclose(
+            model.site_pos[sid], model.geom_pos[g] - [0, 0, half[2]], atol=TOL
+        )
         np.testing.assert_allclose(model.site_quat[sid], [1, 0, 0, 0], atol=TOL)
         np.testing.assert_allclose(model.geom_friction[g], [0.8, 0.005, 0.0001])
 
@@ -323,8 +325,11 @@ def test_arms_hang_clear_of_the_torso(file_name: str) -> None:
 
     names = [mj_name(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in range(model.ngeom)]
     arms = [g for g, n in enumerate(names) if "arm" in n or "shoulder" in n]
-    trunk = [g for g, n in enumerate(names)
-             if n.split("_box")[0] in ("pelvis", "abdomen", "chest", "torso")]
+    trunk = [
+        g
+        for g, n in enumerate(names)
+        if n.split("_box")[0] in ("pelvis", "abdomen", "chest", "torso")
+    ]
     assert len(arms) >= 4 and len(trunk) >= 2
     for ga in arms:
         for gt in trunk:

@@ -35,8 +35,13 @@ def sample_messages():
             standing_position_base_in_world=(0.0, 0.0, 1.0),
             joints=[
                 JointInfo(
-                    name="knee", kind="revolute", nq=1, nv=1, torque_limit=[100.0],
-                    position_lower=[0.0], position_upper=[2.0],
+                    name="knee",
+                    kind="revolute",
+                    nq=1,
+                    nv=1,
+                    torque_limit=[100.0],
+                    position_lower=[0.0],
+                    position_upper=[2.0],
                 )
             ],
             contacts=[CONTACT],
@@ -76,8 +81,14 @@ def sample_messages():
             seq=4,
             sessions=[
                 SessionStats(
-                    session_id="abc", model_name="m", controller="tracking", ticks=3, errors=0,
-                    compute_time_p50_s=1e-3, compute_time_p99_s=2e-3, idle_s=0.1,
+                    session_id="abc",
+                    model_name="m",
+                    controller="tracking",
+                    ticks=3,
+                    errors=0,
+                    compute_time_p50_s=1e-3,
+                    compute_time_p99_s=2e-3,
+                    idle_s=0.1,
                 )
             ],
         ),

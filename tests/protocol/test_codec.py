@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 from protocol import MESSAGE_TYPES, PROTOCOL_VERSION, ErrorCode, ProtocolError, decode, encode
 from protocol.messages import Bye, State
 from tests.protocol.samples import sample_messages
+from tests.protocol.strategies import malformed_maps, msgpack_values
 
 FUZZ = settings(max_examples=4000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -42,7 +43,9 @@ def test_golden_bytes_of_bye():
 def test_arrays_travel_as_little_endian_float64_bin():
     state = sample_messages()[2]
     payload = msgpack.unpackb(encode(state))
-    assert payload["joint_position"] == b"\x9a\x99\x99\x99\x99\x99\xb9?\x9a\x99\x99\x99\x99\x99\xc9?"
+    assert (
+        payload["joint_position"] == b"\x9a\x99\x99\x99\x99\x99\xb9?\x9a\x99\x99\x99\x99\x99\xc9?"
+    )
     assert payload["joint_position"] == np.array([0.1, 0.2], "<f8").tobytes()
 
 
@@ -65,7 +68,11 @@ def _state_payload(**changes):
         (_state_payload(time_s=float("nan")), ErrorCode.NON_FINITE, "time_s"),
         (_state_payload(extra=1), ErrorCode.INVALID_FIELD, "extra"),
         (_state_payload(joint_position=b"\x00" * 7), ErrorCode.BAD_SHAPE, "joint_position"),
-        (_state_payload(position_base_in_world=b"\x00" * 16), ErrorCode.BAD_SHAPE, "position_base_in_world"),
+        (
+            _state_payload(position_base_in_world=b"\x00" * 16),
+            ErrorCode.BAD_SHAPE,
+            "position_base_in_world",
+        ),
         (
             _state_payload(joint_velocity=np.array([0.0, np.inf]).tobytes()),
             ErrorCode.NON_FINITE,
@@ -111,32 +118,6 @@ def _decode_or_protocol_error(data: bytes):
 @given(st.binary(max_size=512))
 def test_fuzz_random_bytes(data):
     _decode_or_protocol_error(data)
-
-
-scalars = (
-    st.none() | st.booleans() | st.integers(-(2**63), 2**64 - 1) | st.floats()
-    | st.text(max_size=8) | st.binary(max_size=48)
-)
-msgpack_values = (
-    scalars
-    | st.lists(scalars, max_size=4)
-    | st.dictionaries(st.text(max_size=6), scalars, max_size=3)
-)
-message_keys = st.sampled_from(
-    sorted({key for cls in MESSAGE_TYPES.values() for key in cls.model_fields})
-) | st.text(max_size=8)
-malformed_maps = st.fixed_dictionaries(
-    {},
-    optional={
-        "version": st.just(PROTOCOL_VERSION) | msgpack_values,
-        "type": st.sampled_from(sorted(MESSAGE_TYPES)) | msgpack_values,
-        "seq": st.integers(-5, 2**64 - 1) | msgpack_values,
-    },
-).flatmap(
-    lambda head: st.dictionaries(message_keys, msgpack_values, max_size=6).map(
-        lambda tail: {**tail, **head}
-    )
-)
 
 
 @FUZZ

@@ -1,0 +1,169 @@
+"""The server's request handling, without sockets: every bad input gets a typed error."""
+
+import msgpack
+import numpy as np
+import pytest
+
+from controller_server.server import ControllerServer
+from protocol import ErrorCode, decode, encode
+from protocol.messages import Bye, Command, Error, Hello, Params, SetParams, Stats, Welcome
+from tests.helpers import random_state
+
+ALICE, BOB = b"alice", b"bob"
+
+
+@pytest.fixture
+def server():
+    instance = ControllerServer(["tcp://127.0.0.1:*"], session_timeout_s=5.0)
+    yield instance
+    instance.close()
+
+
+def ask(server, identity, message):
+    """Send through the codec both ways, as the socket loop does."""
+    payload = message if isinstance(message, bytes) else encode(message)
+    return decode(encode(server.handle(identity, payload)))
+
+
+def hello(server, identity=ALICE, **fields):
+    fields.setdefault("model", "thesis_humanoid")
+    reply = ask(server, identity, Hello(seq=1, **fields))
+    assert isinstance(reply, Welcome), reply
+    return reply
+
+
+def assert_error(reply, code, field=None, seq=None):
+    assert isinstance(reply, Error), reply
+    assert reply.code == code, reply
+    if field is not None:
+        assert reply.field == field, reply
+    if seq is not None:
+        assert reply.seq == seq
+    assert reply.detail
+
+
+def test_state_before_hello_is_no_session(server):
+    welcome_like = hello(server, BOB)
+    state = random_state(welcome_like, np.random.default_rng(0)).model_copy(update={"seq": 9})
+    assert_error(ask(server, ALICE, state), ErrorCode.NO_SESSION, seq=9)
+
+
+@pytest.mark.parametrize(
+    ("fields", "code", "field"),
+    [
+        ({"model": "no_such_robot"}, ErrorCode.MODEL_NOT_FOUND, "model"),
+        ({"model": "/etc/hostname"}, ErrorCode.MODEL_INVALID, "model"),
+        ({"model": None, "model_text": "<mujoco><worldbody>"}, ErrorCode.MODEL_INVALID, "model"),
+        ({"controller": "magic"}, ErrorCode.UNKNOWN_CONTROLLER, "controller"),
+        ({"expected_model_hash": "0" * 64}, ErrorCode.MODEL_MISMATCH, "expected_model_hash"),
+        ({"params": {"stiffness": -1.0}}, ErrorCode.INVALID_PARAMS, "params.stiffness"),
+        ({"params": {"warp": 9.0}}, ErrorCode.INVALID_PARAMS, "params.warp"),
+    ],
+)
+def test_bad_hello_is_refused_with_the_field(server, fields, code, field):
+    fields = {"model": "thesis_humanoid", **fields}
+    assert_error(ask(server, ALICE, Hello(seq=4, **fields)), code, field, seq=4)
+    assert ALICE not in server.sessions
+
+
+def test_matching_model_hash_is_accepted(server):
+    first = hello(server, BOB)
+    second = hello(server, ALICE, expected_model_hash=first.model_hash)
+    assert second.model_hash == first.model_hash
+
+
+def _payload(state, **changes):
+    payload = msgpack.unpackb(encode(state))
+    payload.update(changes)
+    return msgpack.packb(payload)
+
+
+def test_state_sizes_are_checked_against_the_robot(server):
+    welcome = hello(server)
+    state = random_state(welcome, np.random.default_rng(1))
+    nq = state.joint_position.size
+    cases = [
+        (_payload(state, joint_position=np.zeros(nq - 1).tobytes()), "joint_position"),
+        (_payload(state, joint_velocity=np.zeros(3).tobytes()), "joint_velocity"),
+        (_payload(state, contact_flags=[True]), "contact_flags"),
+    ]
+    for payload, field in cases:
+        assert_error(ask(server, ALICE, payload), ErrorCode.BAD_SHAPE, field)
+    assert_error(
+        ask(server, ALICE, _payload(state, orientation_base_in_world_xyzw=np.zeros(4).tobytes())),
+        ErrorCode.INVALID_FIELD,
+        "orientation_base_in_world_xyzw",
+    )
+    zero_ball = state.joint_position.copy()
+    zero_ball[:4] = 0.0  # first joint of the thesis humanoid is a ball joint
+    assert_error(
+        ask(server, ALICE, _payload(state, joint_position=zero_ball.tobytes())),
+        ErrorCode.INVALID_FIELD,
+        "joint_position",
+    )
+    nan = state.joint_velocity.copy()
+    nan[2] = np.nan
+    assert_error(
+        ask(server, ALICE, _payload(state, joint_velocity=nan.tobytes())), ErrorCode.NON_FINITE
+    )
+    # The session survives all of that.
+    assert isinstance(ask(server, ALICE, state), Command)
+    assert server.sessions[ALICE].errors == 6
+
+
+def test_set_params_is_atomic_and_validated(server):
+    welcome = hello(server)
+    reply = ask(server, ALICE, SetParams(seq=2, params={"stiffness": 50.0, "damping": 10.0}))
+    assert isinstance(reply, Params)
+    assert reply.params["stiffness"] == 50.0
+    bad = SetParams(seq=3, params={"stiffness": 70.0, "damping": float("nan")})
+    assert_error(ask(server, ALICE, bad), ErrorCode.INVALID_PARAMS, "params.damping")
+    assert server.sessions[ALICE].controller.parameters()["stiffness"] == 50.0
+    wrong_length = SetParams(seq=4, params={"reference_joint_position": [0.0]})
+    assert_error(ask(server, ALICE, wrong_length), ErrorCode.INVALID_PARAMS)
+    assert_error(
+        ask(server, ALICE, SetParams(seq=5, params={"qp_solver": "cplex"})),
+        ErrorCode.INVALID_PARAMS,
+    )
+    assert welcome.params["qp_solver"] == "daqp"
+
+
+def test_replies_sent_as_requests_are_refused(server):
+    welcome = hello(server)
+    assert_error(ask(server, ALICE, welcome), ErrorCode.UNEXPECTED_MESSAGE, "type")
+    assert_error(ask(server, ALICE, Stats(seq=1, sessions=[])), ErrorCode.UNEXPECTED_MESSAGE)
+
+
+def test_stats_bye_and_expiry(server):
+    welcome = hello(server)
+    hello(server, BOB, model="dino_biped")
+    ask(server, ALICE, random_state(welcome, np.random.default_rng(2)))
+    stats = ask(server, ALICE, Stats(seq=3))
+    ticks = {s.model_name: s.ticks for s in stats.sessions}
+    assert ticks == {"thesis_humanoid": 1, "dino_biped": 0}
+    assert isinstance(ask(server, BOB, Bye(seq=4)), Bye)
+    assert_error(ask(server, BOB, Bye(seq=5)), ErrorCode.NO_SESSION)
+    session = server.sessions[ALICE]
+    assert server.expire_sessions(session.last_seen_s + 1.0) == []
+    assert server.expire_sessions(session.last_seen_s + 6.0) == [session.session_id]
+    assert_error(
+        ask(server, ALICE, random_state(welcome, np.random.default_rng(2))), ErrorCode.NO_SESSION
+    )
+
+
+def test_controller_failure_is_internal_error_and_session_survives(server, monkeypatch):
+    welcome = hello(server)
+    session = server.sessions[ALICE]
+    original = session.controller.compute
+    calls = []
+
+    def failing_once(control_input):
+        calls.append(1)
+        if len(calls) == 1:
+            raise FloatingPointError("boom")
+        return original(control_input)
+
+    monkeypatch.setattr(session.controller, "compute", failing_once)
+    state = random_state(welcome, np.random.default_rng(4))
+    assert_error(ask(server, ALICE, state), ErrorCode.INTERNAL)
+    assert isinstance(ask(server, ALICE, state), Command)
