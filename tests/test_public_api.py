@@ -1,0 +1,42 @@
+"""Every subpackage's ``__all__`` names exist, so the exported surface can't rot."""
+
+import importlib
+
+import pytest
+
+PACKAGES = [
+    "protocol",
+    "protocol.arrays",
+    "protocol.codec",
+    "protocol.errors",
+    "protocol.messages",
+    "controller_server.models",
+    "controller_server.features",
+    "controller_server.constraints",
+    "controller_server.solvers",
+    "controller_server.controllers",
+    "controller_server.dynamics",
+    "controller_server.inverse_dynamics",
+    "controller_server.server",
+    "controller_server.session",
+    "controller_server.wire",
+    "clients",
+    "clients.client",
+    "clients.scripted",
+]
+
+
+@pytest.mark.parametrize("name", PACKAGES)
+def test_all_names_exist(name):
+    module = importlib.import_module(name)
+    assert module.__all__
+    for exported in module.__all__:
+        assert hasattr(module, exported), f"{name}.{exported}"
+
+
+def test_protocol_does_not_import_robotics_code():
+    import subprocess
+    import sys
+
+    code = "import sys, protocol; print(sorted(m for m in ('pinocchio', 'controller_server', 'clients') if m in sys.modules))"
+    assert subprocess.check_output([sys.executable, "-c", code], text=True).strip() == "[]"
