@@ -70,9 +70,12 @@ def main() -> None:
         joints = list(welcome.joints)
         nv = sum(j.nv for j in joints)
         state = KinematicState(
-            perturbed_pose(joints, 0.05), np.zeros(nv),
-            np.array(welcome.standing_position_base_in_world), np.array([0.0, 0.0, 0.0, 1.0]),
-            np.zeros(3), np.zeros(3),
+            perturbed_pose(joints, 0.05),
+            np.zeros(nv),
+            np.array(welcome.standing_position_base_in_world),
+            np.array([0.0, 0.0, 0.0, 1.0]),
+            np.zeros(3),
+            np.zeros(3),
         ).to_message(0.0, [True] * len(welcome.contacts))
         command = client.step(state)
         request_size, reply_size = len(encode(state)), len(encode(command))
@@ -104,17 +107,25 @@ def main() -> None:
     context.term()
     echo.join(5)
 
-    print(f"model {args.model}: request {request_size} B, reply {reply_size} B, {args.count} round trips")
-    print(f"{'mode':<14}{'echo p50':>11}{'echo p99':>11}{'poise p50':>11}{'poise p99':>11}"
-          f"{'p50 ratio':>11}{'p99 ratio':>11}")
+    print(f"model {args.model}: request {request_size} B, reply {reply_size} B, ", end="")
+    print(f"{args.count} round trips per mode")
+    print(
+        f"{'mode':<14}{'echo p50':>11}{'echo p99':>11}{'poise p50':>11}{'poise p99':>11}"
+        f"{'p50 ratio':>11}{'p99 ratio':>11}"
+    )
     for mode in poise:
         e50, e99 = summary(raw[mode])
         p50, p99 = summary(poise[mode])
-        print(f"{mode:<14}{e50 * 1e6:>9.0f}µs{e99 * 1e6:>9.0f}µs{p50 * 1e6:>9.0f}µs"
-              f"{p99 * 1e6:>9.0f}µs{p50 / e50:>10.1f}x{p99 / e99:>10.1f}x")
-    print(f"server compute per tick (stats, last 1000): p50 {stats.compute_time_p50_s * 1e6:.0f}µs, "
-          f"p99 {stats.compute_time_p99_s * 1e6:.0f}µs; "
-          f"compute p50 / echo back-to-back p50 = {stats.compute_time_p50_s / summary(raw['back-to-back'])[0]:.1f}x")
+        print(
+            f"{mode:<14}{e50 * 1e6:>9.0f}µs{e99 * 1e6:>9.0f}µs{p50 * 1e6:>9.0f}µs"
+            f"{p99 * 1e6:>9.0f}µs{p50 / e50:>10.1f}x{p99 / e99:>10.1f}x"
+        )
+    compute_p50, compute_p99 = stats.compute_time_p50_s, stats.compute_time_p99_s
+    echo_p50 = summary(raw["back-to-back"])[0]
+    print(
+        f"server compute per tick (stats, last 1000): p50 {compute_p50 * 1e6:.0f}µs, "
+        f"p99 {compute_p99 * 1e6:.0f}µs; compute p50 / echo p50 = {compute_p50 / echo_p50:.1f}x"
+    )
 
 
 if __name__ == "__main__":

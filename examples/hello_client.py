@@ -14,6 +14,7 @@ from protocol import State
 
 
 def main(endpoint: str) -> None:
+    """Handshake, five ticks of the standing pose, print torques and ground force."""
     with ControllerClient(endpoint, timeout_s=5.0) as client:
         welcome = client.connect("thesis_humanoid", params={"stiffness": 100.0})
         print(f"{welcome.model_name}: {len(welcome.joints)} joints, {welcome.total_mass:.1f} kg")

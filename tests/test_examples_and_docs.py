@@ -37,7 +37,13 @@ def test_readme_commands_are_what_ci_runs():
 
 @pytest.mark.parametrize("command", ["", "serve", "demo"])
 def test_cli_help_runs_and_is_in_the_readme(command):
-    args = [sys.executable, "-m", "controller_server.cli", *([command] if command else []), "--help"]
+    args = [
+        sys.executable,
+        "-m",
+        "controller_server.cli",
+        *([command] if command else []),
+        "--help",
+    ]
     output = subprocess.check_output(args, text=True, cwd=ROOT)
     assert "usage: poise" in output
     if command:

@@ -58,7 +58,10 @@ class TrackingController(Controller):
             1e-6, minimum=1e-12, maximum=1.0, doc="ε on ‖q̈‖² in the KKT solve (1)"
         ),
         "force_regularization": ParamSpec(
-            1e-6, minimum=1e-12, maximum=1.0, doc="ε on ‖f‖² when the cones cannot balance exactly (1/N²)"
+            1e-6,
+            minimum=1e-12,
+            maximum=1.0,
+            doc="ε on ‖f‖² when the cones cannot balance exactly (1/N²)",
         ),
         "qp_solver": ParamSpec(
             "daqp",
