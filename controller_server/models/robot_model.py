@@ -96,6 +96,8 @@ class RobotModel:
         torque_limit: ``(nv - 6,)`` symmetric torque limits (N·m, N).
         standing_position_base_in_world: Base position (m) at which the
             neutral pose stands (the file's root body position).
+        ball_swing_limit: Maximum swing angle (rad) per ball joint name, from
+            the MJCF ``range`` upper bound (π where the file gives none).
     """
 
     name: str
@@ -105,6 +107,7 @@ class RobotModel:
     contacts: tuple[Contact, ...]
     torque_limit: np.ndarray
     standing_position_base_in_world: np.ndarray
+    ball_swing_limit: dict[str, float]
 
     @property
     def nq_joints(self) -> int:
@@ -150,6 +153,15 @@ def _mjcf_torque_limits(root: ET.Element, model: pin.Model) -> np.ndarray:
         for axis in axes:
             limit[joint.idx_v + axis] = bound
     return limit[6:]
+
+
+def _mjcf_ball_swing_limits(root: ET.Element) -> dict[str, float]:
+    """Upper bound of ``range`` of every limited ball joint (MJCF: radians here)."""
+    limits = {}
+    for joint in root.iter("joint"):
+        if joint.get("type") == "ball" and "range" in joint.attrib:
+            limits[joint.get("name", "")] = float(joint.get("range", "0 0").split()[1])
+    return limits
 
 
 def _default_contacts(root: ET.Element, model: pin.Model) -> list[ContactSpec]:
@@ -314,8 +326,10 @@ def _load_cached(text: bytes, name: str, fmt: str, contacts_json: str | None) ->
             # Pinocchio drops the root body's position when it adds the free flyer.
             standing_position = standing_position + _mjcf_root_body_position(root)
         torque_limit = _mjcf_torque_limits(root, model)
+        swing_limits = _mjcf_ball_swing_limits(root)
         specs = list(contacts) if contacts is not None else _default_contacts(root, model)
     else:
+        swing_limits = {}
         torque_limit = np.asarray(model.effortLimit[6:], dtype=float).copy()
         torque_limit[torque_limit <= 0] = np.inf
         specs = list(contacts or [])
@@ -328,12 +342,18 @@ def _load_cached(text: bytes, name: str, fmt: str, contacts_json: str | None) ->
     torque_limit.setflags(write=False)
     standing_position.setflags(write=False)
     resolved = tuple(_resolve(spec, model) for spec in specs)
+    joints = _joint_infos(model, torque_limit)
     return RobotModel(
         name=name,
         model=model,
         model_hash=_hash(text, specs),
-        joints=_joint_infos(model, torque_limit),
+        joints=joints,
         contacts=resolved,
         torque_limit=torque_limit,
         standing_position_base_in_world=standing_position,
+        ball_swing_limit={
+            info.name: swing_limits.get(info.name, np.pi)
+            for info in joints
+            if info.kind == "ball"
+        },
     )
