@@ -11,7 +11,11 @@ zero-acceleration forward kinematics pass, then reads off
   ``J̇ q̇`` in the world-aligned frame at the contact frame's origin (thesis
   App. A; these are the rows of the support constraint, eq. 5.1),
 * for every contact point, the 3-row point Jacobian and its drift, used to
-  map contact forces to generalized forces (``J_cᵀ f`` of eq. 4.2).
+  map contact forces to generalized forces (``J_cᵀ f`` of eq. 4.2),
+* the momentum derivative matrices of App. B (:mod:`controller_server.momentum`).
+
+:func:`point_kinematics` gives the same point rows for any frame and offset
+(the point-acceleration objective, App. C).
 
 Pinocchio's free-flyer convention holds inside the server: ``q = [p, quat_xyzw,
 q_joints]``, ``v = [v_base_in_base, ω_base_in_base, v_joints]``.
@@ -25,22 +29,12 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.models import RobotModel
+from controller_server.momentum import MomentumRates, compute_momentum_rates
+from controller_server.spatial import cross
 
-__all__ = ["DynamicsTerms", "compute_dynamics_terms", "cross", "skew"]
+__all__ = ["DynamicsTerms", "PointKinematics", "compute_dynamics_terms", "point_kinematics"]
 
 WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-
-
-def skew(u: np.ndarray) -> np.ndarray:
-    """Cross-product matrix ``[u]×`` (Macchietto 2008, eq. A.4)."""
-    return np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
-
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis, broadcasting (``numpy.cross`` without its overhead)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 @dataclass(frozen=True)
@@ -60,6 +54,9 @@ class DynamicsTerms:
         point_jacobians: Per contact, ``(3k, nv)``: velocity of each point in world axes.
         point_drifts: Per contact, ``(3k,)``: point acceleration at ``q̈ = 0``.
         position_points_in_world: Per contact, ``(k, 3)`` point positions (m).
+        position_contact_frames_in_world: ``(contacts, 3)`` contact frame origins (m).
+        momentum: Momentum derivative matrices and momenta (App. B).
+        total_mass: ``m_T`` (kg).
     """
 
     q: np.ndarray
@@ -72,6 +69,52 @@ class DynamicsTerms:
     point_jacobians: tuple[np.ndarray, ...]
     point_drifts: tuple[np.ndarray, ...]
     position_points_in_world: tuple[np.ndarray, ...]
+    position_contact_frames_in_world: np.ndarray
+    momentum: MomentumRates
+    total_mass: float
+
+
+@dataclass(frozen=True)
+class PointKinematics:
+    """Points fixed to one frame: where they are and how they move.
+
+    Attributes:
+        position_in_world: ``(k, 3)`` (m).
+        velocity_in_world: ``(k, 3)`` (m/s).
+        jacobian: ``(3k, nv)``, ``ṗ = J q̇`` stacked per point.
+        drift: ``(3k,)``, ``p̈`` at ``q̈ = 0`` (App. C, eq. C.7 ``q_bias``).
+    """
+
+    position_in_world: np.ndarray
+    velocity_in_world: np.ndarray
+    jacobian: np.ndarray
+    drift: np.ndarray
+
+
+def point_kinematics(
+    model: pin.Model, data: pin.Data, frame_id: int, points_in_frame: np.ndarray
+) -> PointKinematics:
+    """Point Jacobians and drifts (Macchietto 2008, App. C, eq. C.5–C.8).
+
+    ``data`` must hold ``computeJointJacobians``, ``forwardKinematics(q, v, 0)``
+    and ``updateFramePlacements``.
+    """
+    jacobian = pin.getFrameJacobian(model, data, frame_id, WORLD_ALIGNED)
+    velocity = pin.getFrameVelocity(model, data, frame_id, WORLD_ALIGNED)
+    drift = pin.getFrameClassicalAcceleration(model, data, frame_id, WORLD_ALIGNED)
+    offsets = points_in_frame @ data.oMf[frame_id].rotation.T
+    omega = velocity.angular
+    # v_p = v_o + ω × r  and  a_p = a_o + α × r + ω × (ω × r), all points at once.
+    angular_rows = np.broadcast_to(jacobian[3:].T, (len(offsets), *jacobian[3:].T.shape))
+    lever_rows = cross(angular_rows, offsets[:, None, :])  # (k, nv, 3): J_ω × r
+    return PointKinematics(
+        position_in_world=data.oMf[frame_id].translation + offsets,
+        velocity_in_world=velocity.linear + cross(omega, offsets),
+        jacobian=(jacobian[None, :3, :] + lever_rows.transpose(0, 2, 1)).reshape(-1, model.nv),
+        drift=(
+            drift.linear + cross(drift.angular, offsets) + cross(omega, cross(omega, offsets))
+        ).reshape(-1),
+    )
 
 
 def compute_dynamics_terms(
@@ -102,29 +145,13 @@ def compute_dynamics_terms(
     for contact in robot.contacts:
         frame_id = contact.frame_id
         jacobian = pin.getFrameJacobian(model, data, frame_id, WORLD_ALIGNED)
-        velocity = pin.getFrameVelocity(model, data, frame_id, WORLD_ALIGNED)
         drift = pin.getFrameClassicalAcceleration(model, data, frame_id, WORLD_ALIGNED)
         support_jacobians.append(jacobian)
         support_drifts.append(np.concatenate([drift.linear, drift.angular]))
-
-        offsets_in_world = contact.points_in_frame @ data.oMf[frame_id].rotation.T
-        # v_p = v_o + ω × r  and  a_p = a_o + α × r + ω × (ω × r), all points at once.
-        angular_rows = np.broadcast_to(
-            jacobian[3:].T, (len(offsets_in_world), *jacobian[3:].T.shape)
-        )
-        lever_rows = cross(angular_rows, offsets_in_world[:, None, :])  # (k, nv, 3): J_ω × r
-        point_jacobians.append(
-            (jacobian[None, :3, :] + lever_rows.transpose(0, 2, 1)).reshape(-1, model.nv)
-        )
-        omega = velocity.angular
-        point_drifts.append(
-            (
-                drift.linear
-                + cross(drift.angular, offsets_in_world)
-                + cross(omega, cross(omega, offsets_in_world))
-            ).reshape(-1)
-        )
-        point_positions.append(data.oMf[frame_id].translation + offsets_in_world)
+        points = point_kinematics(model, data, frame_id, contact.points_in_frame)
+        point_jacobians.append(points.jacobian)
+        point_drifts.append(points.drift)
+        point_positions.append(points.position_in_world)
 
     return DynamicsTerms(
         q=q,
@@ -137,4 +164,9 @@ def compute_dynamics_terms(
         point_jacobians=tuple(point_jacobians),
         point_drifts=tuple(point_drifts),
         position_points_in_world=tuple(point_positions),
+        position_contact_frames_in_world=np.array(
+            [data.oMf[c.frame_id].translation for c in robot.contacts]
+        ).reshape(-1, 3),
+        momentum=compute_momentum_rates(model, data, v, position_com),
+        total_mass=float(data.mass[0]),
     )

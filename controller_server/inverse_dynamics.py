@@ -4,11 +4,13 @@ Macchietto 2008, eq. 4.2, written with actuated torques ``τ`` (``S = [0 I]``)::
 
     M q̈ + h = Sᵀ τ + J_cᵀ f
 
-The six root rows have no actuator, so the contact forces ``f`` of the
-supporting feet must balance them, within linearized (pyramid) friction
-cones on a flat ground of normal +z (``f_z ≥ 0``, ``|f_x|, |f_y| ≤ μ f_z`` at
-every support point). The distribution is the smallest force that balances
-exactly::
+Two ground-force modes. *Measured*: the client sends the ground wrench of
+every contact (the thesis' penalty forces, or force sensors) and ``τ``
+compensates it, as in the thesis. *Distributed*: the six root rows have no
+actuator, so the contact forces ``f`` of the supporting feet must balance
+them, within linearized (pyramid) friction cones on a flat ground of normal
++z (``f_z ≥ 0``, ``|f_x|, |f_y| ≤ μ f_z`` at every support point). The
+distribution is the smallest force that balances exactly::
 
     min_f ‖f‖²   s.t.  J_c,rootᵀ f = (M q̈ + h)_root,  f in the cones
 
@@ -50,7 +52,9 @@ class InverseDynamicsResult:
     Attributes:
         joint_torque: ``(nv − 6,)`` actuated torques within limits (N·m, N).
         contact_force_in_world: ``(p, 3)`` force at every contact point, zero
-            at points of contacts that are not supports (N).
+            at points of contacts that are not supports and in measured mode (N).
+        contact_wrench_in_world: ``(contacts, 6)`` force and torque about each
+            contact frame origin, world axes (N, N·m).
         acceleration: ``(nv,)`` generalized acceleration consistent with both.
         root_wrench_residual: ``‖(M q̈ + h − J_cᵀ f)_root‖`` before correction.
         saturated_joints: Number of DoFs whose torque was clipped.
@@ -58,6 +62,7 @@ class InverseDynamicsResult:
 
     joint_torque: np.ndarray
     contact_force_in_world: np.ndarray
+    contact_wrench_in_world: np.ndarray
     acceleration: np.ndarray
     root_wrench_residual: float
     saturated_joints: int
@@ -115,6 +120,8 @@ def solve_inverse_dynamics(
     supports: Sequence[bool],
     friction_coefficients: Sequence[float],
     torque_limit: np.ndarray,
+    *,
+    measured_wrenches: np.ndarray | None = None,
     force_regularization: float = 1e-6,
     qp_solver: str = "daqp",
 ) -> InverseDynamicsResult:
@@ -123,40 +130,30 @@ def solve_inverse_dynamics(
     Args:
         terms: Dynamics at the current state.
         acceleration: Desired ``q̈`` from the optimizer, ``(nv,)``.
-        supports: One flag per contact; only supports carry force.
+        supports: One flag per contact; only supports carry distributed force.
         friction_coefficients: μ per contact.
         torque_limit: ``(nv − 6,)`` symmetric limits.
+        measured_wrenches: ``(contacts, 6)`` measured ground wrenches (measured
+            mode), or ``None`` to distribute forces.
         force_regularization: ``ε`` of the least-squares fallback.
         qp_solver: Any solver name ``qpsolvers`` knows.
     """
     M, h = terms.mass_matrix, terms.bias_forces
     generalized_force = M @ acceleration + h
     root_wrench = generalized_force[:NUM_ROOT_DOFS]
-
-    jacobians = [J for J, on in zip(terms.point_jacobians, supports, strict=True) if on]
-    mus = [
-        mu
-        for J, mu, on in zip(terms.point_jacobians, friction_coefficients, supports, strict=True)
-        if on
-        for _ in range(J.shape[0] // 3)
-    ]
-    num_points_total = sum(J.shape[0] // 3 for J in terms.point_jacobians)
-    forces = np.zeros((num_points_total, 3))
-    contact_generalized_force = np.zeros_like(h)
-    if jacobians:
-        J_c = np.vstack(jacobians)
-        solution = distribute_contact_forces(
-            J_c[:, :NUM_ROOT_DOFS].T, root_wrench, mus, force_regularization, qp_solver
+    counts = [J.shape[0] // 3 for J in terms.point_jacobians]
+    forces = np.zeros((sum(counts), 3))
+    if measured_wrenches is not None:
+        wrenches = np.asarray(measured_wrenches, dtype=float).reshape(-1, 6)
+        contact_generalized_force = sum(
+            (J.T @ w for J, w in zip(terms.support_jacobians, wrenches, strict=True)),
+            np.zeros_like(h),
         )
-        if solution is not None:
-            contact_generalized_force = J_c.T @ solution
-            support_points = np.concatenate(
-                [
-                    np.full(J.shape[0] // 3, on)
-                    for J, on in zip(terms.point_jacobians, supports, strict=True)
-                ]
-            )
-            forces[support_points] = solution.reshape(-1, 3)
+    else:
+        contact_generalized_force, forces = _distribute(
+            terms, root_wrench, supports, friction_coefficients, force_regularization, qp_solver
+        )
+        wrenches = _wrenches_from_point_forces(terms, forces, counts)
 
     residual = float(np.linalg.norm(root_wrench - contact_generalized_force[:NUM_ROOT_DOFS]))
     torque_unclipped = (generalized_force - contact_generalized_force)[NUM_ROOT_DOFS:]
@@ -166,4 +163,52 @@ def solve_inverse_dynamics(
     applied = contact_generalized_force - h
     applied[NUM_ROOT_DOFS:] += joint_torque
     realized = scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), applied)
-    return InverseDynamicsResult(joint_torque, forces, realized, residual, saturated)
+    return InverseDynamicsResult(joint_torque, forces, wrenches, realized, residual, saturated)
+
+
+def _distribute(
+    terms: DynamicsTerms,
+    root_wrench: np.ndarray,
+    supports: Sequence[bool],
+    friction_coefficients: Sequence[float],
+    regularization: float,
+    qp_solver: str,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(J_cᵀ f, f per point)`` for forces at the supporting contacts' points."""
+    counts = [J.shape[0] // 3 for J in terms.point_jacobians]
+    forces = np.zeros((sum(counts), 3))
+    generalized = np.zeros_like(terms.bias_forces)
+    if not any(supports):
+        return generalized, forces
+    J_c = np.vstack([J for J, on in zip(terms.point_jacobians, supports, strict=True) if on])
+    mus = [
+        mu
+        for mu, count, on in zip(friction_coefficients, counts, supports, strict=True)
+        if on
+        for _ in range(count)
+    ]
+    solution = distribute_contact_forces(
+        J_c[:, :NUM_ROOT_DOFS].T, root_wrench, mus, regularization, qp_solver
+    )
+    if solution is None:
+        return generalized, forces
+    mask = np.concatenate([np.full(count, on) for count, on in zip(counts, supports, strict=True)])
+    forces[mask] = solution.reshape(-1, 3)
+    return J_c.T @ solution, forces
+
+
+def _wrenches_from_point_forces(
+    terms: DynamicsTerms, forces: np.ndarray, counts: Sequence[int]
+) -> np.ndarray:
+    """Per contact: total force and torque about the contact frame origin."""
+    wrenches = np.zeros((len(counts), 6))
+    start = 0
+    for index, (count, points) in enumerate(
+        zip(counts, terms.position_points_in_world, strict=True)
+    ):
+        contact_forces = forces[start : start + count]
+        offsets = points - terms.position_contact_frames_in_world[index]
+        wrenches[index, :3] = contact_forces.sum(axis=0)
+        wrenches[index, 3:] = np.cross(offsets, contact_forces).sum(axis=0)
+        start += count
+    return wrenches

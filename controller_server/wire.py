@@ -57,6 +57,10 @@ def control_input_from_state(robot: RobotModel, state: State) -> ControlInput:
             f"got {len(state.contact_flags)}",
             seq,
         )
+    wrenches = state.contact_wrench_in_world
+    if wrenches is not None:
+        _check_length("contact_wrench_in_world", wrenches, 6 * len(robot.contacts), seq)
+        wrenches = wrenches.reshape(-1, 6)
     _check_quaternion("orientation_base_in_world_xyzw", state.orientation_base_in_world_xyzw, seq)
     for joint in robot.joints:
         if joint.kind == "ball":
@@ -75,7 +79,7 @@ def control_input_from_state(robot: RobotModel, state: State) -> ControlInput:
             state.joint_velocity,
         ]
     )
-    return ControlInput(state.time_s, q, v, tuple(state.contact_flags))
+    return ControlInput(state.time_s, q, v, tuple(state.contact_flags), wrenches)
 
 
 def command_from_output(
@@ -92,11 +96,6 @@ def command_from_output(
         base_angular_acceleration_in_base=a[3:6],
         joint_torque=output.joint_torque,
         contact_force_in_world=output.contact_force_in_world.reshape(-1),
-        diagnostics=Diagnostics(
-            compute_time_s=compute_time_s,
-            position_com_in_world=output.position_com_in_world,
-            kkt_condition_number=output.kkt_condition_number,
-            root_wrench_residual=output.root_wrench_residual,
-            saturated_joints=output.saturated_joints,
-        ),
+        contact_wrench_in_world=output.contact_wrench_in_world.reshape(-1),
+        diagnostics=Diagnostics(compute_time_s=compute_time_s, **output.diagnostics),
     )

@@ -40,7 +40,9 @@ __all__ = [
 PROTOCOL_VERSION = 1
 """Version of this wire contract; a message with another version is refused."""
 
-ParamValue = float | int | bool | str | list[float]
+ParamValue = float | int | bool | str | list[float] | dict[str, float | str | list[float]] | None
+"""A controller parameter: a number, flag, name, vector, a small record
+(e.g. a point target), or ``null`` (remove, e.g. a point target)."""
 
 
 def wire_field(
@@ -201,17 +203,79 @@ class State(Message):
     contact_flags: list[bool] = wire_field(
         "Per contact (welcome order): is it a support this tick.", shape="contacts"
     )
+    contact_wrench_in_world: FiniteArray | None = wire_field(
+        "Measured ground wrench per contact (force, then torque about the contact frame "
+        "origin); required in `ground_force_mode` `measured`.",
+        shape="contacts × 6",
+        unit="N, N·m",
+        frame="world",
+        default=None,
+    )
 
 
 class Diagnostics(_Strict):
     """What the controller did this tick (for logs and plots)."""
 
     compute_time_s: float = wire_field("Server time spent on this tick.", unit="s")
+    optimizer_ran: bool = wire_field(
+        "Whether the optimizer ran this tick (else the last accelerations were reused)."
+    )
     position_com_in_world: Vector3 = wire_field(
         "Centre of mass.", shape="3", unit="m", frame="world"
     )
-    kkt_condition_number: float = wire_field(
-        "Condition number of the KKT Schur complement C M⁻¹ Cᵀ (Macchietto App. D).", unit="1"
+    velocity_com_in_world: FloatArray = wire_field(
+        "Centre-of-mass velocity.", shape="3", unit="m/s", frame="world"
+    )
+    linear_momentum: FloatArray = wire_field(
+        "Linear momentum L.", shape="3", unit="kg·m/s", frame="world"
+    )
+    angular_momentum: FloatArray = wire_field(
+        "Angular momentum H about the CM.", shape="3", unit="kg·m²/s", frame="world"
+    )
+    linear_momentum_rate_desired: FloatArray = wire_field(
+        "L̇_des of eq. 5.9 (z is NaN: not controlled).", shape="3", unit="N", frame="world"
+    )
+    linear_momentum_rate_achieved: FloatArray = wire_field(
+        "L̇ = R q̈ + r_bias for the returned q̈.", shape="3", unit="N", frame="world"
+    )
+    angular_momentum_rate_desired: FloatArray = wire_field(
+        "Ḣ_des of eq. 5.15.", shape="3", unit="N·m", frame="world"
+    )
+    angular_momentum_rate_achieved: FloatArray = wire_field(
+        "Ḣ = S q̈ + s_bias for the returned q̈.", shape="3", unit="N·m", frame="world"
+    )
+    center_of_pressure: FloatArray = wire_field(
+        "COP of the ground forces in use (eq. 3.3–3.6); NaN without ground force.",
+        shape="3",
+        unit="m",
+        frame="world",
+    )
+    centroidal_moment_pivot: FloatArray = wire_field(
+        "CMP (eq. 3.9–3.10); NaN without ground force.", shape="3", unit="m", frame="world"
+    )
+    support_polygon_xy: FloatArray = wire_field(
+        "Convex hull of the supporting contact points, counter-clockwise x, y pairs.",
+        shape="2 × vertices",
+        unit="m",
+        frame="world",
+    )
+    angular_momentum_weight: float = wire_field("β_ba = γ ‖p − g‖ used this tick (eq. 5.17).")
+    objective_residuals: dict[str, float] = wire_field(
+        "Per objective, the weighted residual ‖W (A q̈ − b)‖ at the returned q̈."
+    )
+    objective_condition_number: float = wire_field(
+        "Condition number of the damped objective Hessian M (App. D).", unit="1"
+    )
+    schur_condition_number: float = wire_field(
+        "Condition number of C M⁻¹ Cᵀ before damping (App. D, eq. D.7).", unit="1"
+    )
+    objective_damping: float = wire_field("Damping λ on the objective stack (Maciejewski eq. 15).")
+    constraint_damping: float = wire_field(
+        "Damping λ on the Schur complement (Maciejewski eq. 15)."
+    )
+    constraint_residual: float = wire_field(
+        "‖J_sup q̈ + J̇_sup q̇‖ of the optimizer's q̈ (non-zero only when damped).",
+        unit="m/s², rad/s²",
     )
     root_wrench_residual: float = wire_field(
         "Norm of the root wrench the contact forces could not balance.", unit="N, N·m"
@@ -239,10 +303,17 @@ class Command(Message):
         frame="joint",
     )
     contact_force_in_world: FloatArray = wire_field(
-        "Force at each contact point (contacts in welcome order, points in order); zero "
-        "at contacts that are not supports.",
+        "Distributed force at each contact point (contacts in welcome order, points in "
+        "order); zero at contacts that are not supports and in `measured` mode.",
         shape="Σ k × 3",
         unit="N",
+        frame="world",
+    )
+    contact_wrench_in_world: FloatArray = wire_field(
+        "Ground wrench per contact used by the inverse dynamics (force, then torque about "
+        "the contact frame origin): distributed, or the measured one echoed.",
+        shape="contacts × 6",
+        unit="N, N·m",
         frame="world",
     )
     diagnostics: Diagnostics = wire_field("See the Diagnostics table.")

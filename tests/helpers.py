@@ -11,7 +11,12 @@ from controller_server.models import BUILTIN_MODELS
 from protocol.messages import Command, State, Welcome
 
 
-def random_state(welcome: Welcome, rng: np.random.Generator, spread: float = 0.1) -> State:
+def random_state(
+    welcome: Welcome,
+    rng: np.random.Generator,
+    spread: float = 0.1,
+    wrenches: bool = False,
+) -> State:
     """A state near standing: small random pose, velocities, tilt and contact flags."""
     joints = list(welcome.joints)
     position = neutral_joint_position(joints)
@@ -33,6 +38,16 @@ def random_state(welcome: Welcome, rng: np.random.Generator, spread: float = 0.1
         linear_velocity_base_in_world=rng.normal(0, spread, 3),
         angular_velocity_base_in_base=rng.normal(0, spread, 3),
         contact_flags=flags,
+        contact_wrench_in_world=(
+            np.concatenate(
+                [
+                    [*rng.normal(0, 20, 2), rng.uniform(0, 400), *rng.normal(0, 5, 3)]
+                    for _ in welcome.contacts
+                ]
+            )
+            if wrenches
+            else None
+        ),
     )
 
 
@@ -40,8 +55,10 @@ class IndependentDynamics:
     """Inverse-dynamics residual computed with Pinocchio alone, from the wire data.
 
     The model is parsed straight from the file (no Poise code), the wire state
-    converted by hand, and the contact point Jacobians taken from Pinocchio's
-    frame Jacobians: ``rnea(q, v, a) − [0; τ] − Σ J_pᵀ f``.
+    converted by hand, and the contact Jacobians taken from Pinocchio's frame
+    Jacobians: ``rnea(q, v, a) − [0; τ] − Σ J_cᵀ w`` with the per-contact
+    wrenches; :attr:`point_force_mismatch` checks the per-point forces give
+    the same generalized force.
     """
 
     def __init__(self, path: str, welcome: Welcome):
@@ -72,20 +89,38 @@ class IndependentDynamics:
         generalized[6:] -= command.joint_torque
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
-        forces = command.contact_force_in_world.reshape(-1, 3)
+        wrenches = command.contact_wrench_in_world.reshape(-1, 6)
+        point_forces = command.contact_force_in_world.reshape(-1, 3)
+        from_points = np.zeros_like(generalized)
         index = 0
-        for contact in self.welcome.contacts:
+        for contact, wrench in zip(self.welcome.contacts, wrenches, strict=True):
             frame_id = self.model.getFrameId(contact.frame)
             jacobian = pin.getFrameJacobian(
                 self.model, self.data, frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
             )
+            generalized -= jacobian.T @ wrench
             rotation_frame = self.data.oMf[frame_id].rotation
             for point in contact.points_in_frame:
                 offset = rotation_frame @ np.array(point)
-                skew = pin.skew(offset)
-                point_jacobian = jacobian[:3] - skew @ jacobian[3:]
-                generalized -= point_jacobian.T @ forces[index]
+                point_jacobian = jacobian[:3] - pin.skew(offset) @ jacobian[3:]
+                from_points += point_jacobian.T @ point_forces[index]
                 index += 1
+        self.point_force_mismatch = (
+            float(np.abs(from_points).max()) if not point_forces.any() else 0.0
+        )
+        if point_forces.any():
+            # Distributed mode: the point forces and the per-contact wrenches agree.
+            wrench_generalized = sum(
+                pin.getFrameJacobian(
+                    self.model,
+                    self.data,
+                    self.model.getFrameId(c.frame),
+                    pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+                ).T
+                @ w
+                for c, w in zip(self.welcome.contacts, wrenches, strict=True)
+            )
+            self.point_force_mismatch = float(np.abs(from_points - wrench_generalized).max())
         return float(np.abs(generalized).max())
 
 

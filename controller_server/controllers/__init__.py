@@ -4,7 +4,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from controller_server.controllers.base import ControlInput, Controller, ControlOutput, ParamSpec
-from controller_server.controllers.tracking import TrackingController
+from controller_server.controllers.momentum import MomentumController, TrackingController
 from controller_server.models import RobotModel
 from protocol.errors import ErrorCode, ProtocolError
 
@@ -13,12 +13,15 @@ __all__ = [
     "ControlInput",
     "ControlOutput",
     "Controller",
+    "MomentumController",
     "ParamSpec",
     "TrackingController",
     "create_controller",
 ]
 
-CONTROLLERS: dict[str, type[Controller]] = {cls.name: cls for cls in (TrackingController,)}
+CONTROLLERS: dict[str, type[Controller]] = {
+    cls.name: cls for cls in (TrackingController, MomentumController)
+}
 """Controller classes by the name a client gives in ``hello``."""
 
 

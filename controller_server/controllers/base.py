@@ -20,7 +20,21 @@ import numpy as np
 from controller_server.errors import InvalidParams
 from controller_server.models import RobotModel
 
-__all__ = ["ControlInput", "ControlOutput", "Controller", "ParamSpec"]
+__all__ = ["ControlInput", "ControlOutput", "Controller", "ParamSpec", "vector_value"]
+
+
+def vector_value(field: str, value: Any, length: int) -> np.ndarray:
+    """A list of ``length`` finite numbers as an array, or :class:`InvalidParams`."""
+    if not isinstance(value, list | tuple | np.ndarray) or any(
+        isinstance(x, bool) or not isinstance(x, int | float | np.floating) for x in value
+    ):
+        raise InvalidParams(field, f"{value=!r} is not a list of numbers")
+    array = np.asarray(value, dtype=float).reshape(-1)
+    if array.size != length:
+        raise InvalidParams(field, f"expected {length} values, got {array.size}")
+    if not np.all(np.isfinite(array)):
+        raise InvalidParams(field, f"{value=!r} must be finite")
+    return array
 
 
 @dataclass(frozen=True)
@@ -29,7 +43,7 @@ class ParamSpec:
 
     Attributes:
         default: Value when not set (``None`` for vectors derived from the model).
-        kind: ``"float"``, ``"vector"`` or ``"choice"``.
+        kind: ``"float"``, ``"int"``, ``"bool"``, ``"vector"``, ``"choice"`` or ``"text"``.
         minimum: Smallest allowed value (floats, vector entries).
         maximum: Largest allowed value.
         choices: Allowed strings for ``"choice"``.
@@ -53,12 +67,14 @@ class ControlInput:
         q: Configuration ``[p_base, quat_xyzw, q_joints]``, ``(nq,)``.
         v: Velocity ``[v_base_in_base, ω_base_in_base, v_joints]``, ``(nv,)``.
         contact_flags: One flag per contact of the robot.
+        contact_wrench_in_world: ``(contacts, 6)`` measured ground wrenches, if sent.
     """
 
     time_s: float
     q: np.ndarray
     v: np.ndarray
     contact_flags: tuple[bool, ...]
+    contact_wrench_in_world: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -69,19 +85,16 @@ class ControlOutput:
         acceleration: ``(nv,)`` generalized acceleration.
         joint_torque: ``(nv − 6,)`` actuated torques.
         contact_force_in_world: ``(p, 3)`` per contact point (N).
-        position_com_in_world: Centre of mass (m).
-        kkt_condition_number: Condition number of the KKT Schur complement.
-        root_wrench_residual: Root wrench the contact forces could not balance.
-        saturated_joints: DoFs whose torque hit the limit.
+        contact_wrench_in_world: ``(contacts, 6)`` per contact (N, N·m).
+        diagnostics: Wire diagnostics of this tick except the compute time
+            (see :class:`protocol.Diagnostics`).
     """
 
     acceleration: np.ndarray
     joint_torque: np.ndarray
     contact_force_in_world: np.ndarray
-    position_com_in_world: np.ndarray
-    kkt_condition_number: float
-    root_wrench_residual: float
-    saturated_joints: int
+    contact_wrench_in_world: np.ndarray
+    diagnostics: dict[str, Any]
 
 
 class Controller(ABC):
@@ -124,21 +137,28 @@ class Controller(ABC):
             if value not in spec.choices:
                 raise InvalidParams(field, f"{value=!r}; choose one of {spec.choices}")
             return value
-        if spec.kind == "float":
+        if spec.kind == "text":
+            if not isinstance(value, str):
+                raise InvalidParams(field, f"{value=!r} is not a string")
+            return value
+        if spec.kind == "bool":
+            if not isinstance(value, bool):
+                raise InvalidParams(field, f"{value=!r} is not true or false")
+            return value
+        if spec.kind in ("float", "int"):
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise InvalidParams(field, f"{value=!r} is not a number")
+            if spec.kind == "int" and float(value) != int(value):
+                raise InvalidParams(field, f"{value=!r} is not an integer")
             array = np.array([float(value)])
         else:
-            if not isinstance(value, list | tuple | np.ndarray):
-                raise InvalidParams(field, f"{value=!r} is not a list of numbers")
-            array = np.asarray(value, dtype=float).reshape(-1)
-            expected = np.size(self.default_value(key))
-            if array.size != expected:
-                raise InvalidParams(field, f"expected {expected} values, got {array.size}")
+            array = vector_value(field, value, np.size(self.default_value(key)))
         if not np.all(np.isfinite(array)):
             raise InvalidParams(field, f"{value=!r} must be finite")
         if np.any(array < spec.minimum) or np.any(array > spec.maximum):
             raise InvalidParams(field, f"{value=!r} outside [{spec.minimum}, {spec.maximum}]")
+        if spec.kind == "int":
+            return int(array[0])
         return float(array[0]) if spec.kind == "float" else array
 
     @abstractmethod

@@ -352,8 +352,6 @@ def _load_cached(text: bytes, name: str, fmt: str, contacts_json: str | None) ->
         torque_limit=torque_limit,
         standing_position_base_in_world=standing_position,
         ball_swing_limit={
-            info.name: swing_limits.get(info.name, np.pi)
-            for info in joints
-            if info.kind == "ball"
+            info.name: swing_limits.get(info.name, np.pi) for info in joints if info.kind == "ball"
         },
     )

@@ -1,5 +1,6 @@
 """Solvers for the controllers' optimization problems."""
 
+from controller_server.solvers.damped import damped_solve_psd, damping_for_gain_bound
 from controller_server.solvers.kkt import (
     KKTSolution,
     WeightedProblem,
@@ -7,4 +8,11 @@ from controller_server.solvers.kkt import (
     solve_weighted_kkt,
 )
 
-__all__ = ["KKTSolution", "WeightedProblem", "build_weighted_problem", "solve_weighted_kkt"]
+__all__ = [
+    "KKTSolution",
+    "WeightedProblem",
+    "build_weighted_problem",
+    "damped_solve_psd",
+    "damping_for_gain_bound",
+    "solve_weighted_kkt",
+]

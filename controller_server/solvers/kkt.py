@@ -7,15 +7,24 @@ Macchietto 2008, Appendix D::
     C M⁻¹ Cᵀ λ = d − C M⁻¹ u                                     (D.7)
     M x = u + Cᵀ λ                                               (D.8)
 
-``M`` gets a small Tikhonov term ``ε I`` so that unknowns no objective
-touches (e.g. the root position) stay determined; the Schur complement
-``C M⁻¹ Cᵀ`` is solved through its eigen-decomposition, dropping directions
-below a relative cut-off, so redundant or dependent support rows give the
-minimum-norm multipliers instead of a failure.
+Both linear solves are damped least squares (Maciejewski 1990, eq. 15–18)
+with damping chosen from the smallest singular value so a gain bound holds
+(:mod:`controller_server.solvers.damped`):
+
+* the objective stack ``W^{½} A`` with bound ``B_obj``: ``M ← M + λ_obj² I``.
+  Unknowns that no objective touches (σ = 0, e.g. the root translation) get
+  λ_obj = 1/(2 B_obj), which keeps them determined by the constraints;
+* the constraint rows in the metric of ``M``, ``C̃ = C L⁻ᵀ`` (``M = L Lᵀ``),
+  whose Gram matrix is the Schur complement ``C M⁻¹ Cᵀ``, with bound ``B_con``:
+  the correction ``x − x_free`` then obeys ``‖x − x_free‖_M ≤ B_con ‖d − C x_free‖``
+  however close the supports come to a singularity (straight knees,
+  dropped supports), and varies continuously along the way. Away from
+  singularities nothing is damped and the constraint holds exactly.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -25,11 +34,9 @@ import scipy.linalg
 
 from controller_server.constraints import Equality
 from controller_server.features import Objective
+from controller_server.solvers.damped import damped_solve_psd, damping_for_gain_bound
 
 __all__ = ["KKTSolution", "WeightedProblem", "build_weighted_problem", "solve_weighted_kkt"]
-
-SCHUR_RELATIVE_CUTOFF = 1e-12
-"""Eigenvalues of ``C M⁻¹ Cᵀ`` below this fraction of the largest are dropped."""
 
 
 @dataclass(frozen=True)
@@ -37,10 +44,12 @@ class WeightedProblem:
     """Normal equations of eq. D.1 plus the equality: a plain, loggable object.
 
     Attributes:
-        hessian: ``M = Σ Aᵀ W A + ε I``.
+        hessian: ``M = Σ Aᵀ W A`` (undamped).
         gradient: ``u = Σ Aᵀ W b``.
         equality: ``C x = d``.
         objectives: The objectives the problem was built from.
+        objective_gain_bound: ``B_obj`` for the objective solve.
+        constraint_gain_bound: ``B_con`` for the constraint solve.
         build_time_s: Time spent building (s).
     """
 
@@ -48,6 +57,8 @@ class WeightedProblem:
     gradient: np.ndarray
     equality: Equality
     objectives: tuple[Objective, ...]
+    objective_gain_bound: float
+    constraint_gain_bound: float
     build_time_s: float
 
 
@@ -58,40 +69,58 @@ class KKTSolution:
     Attributes:
         found: Whether a finite solution was found.
         x: Solution (zeros if not found).
+        x_free: Minimizer of the objectives alone (``M⁻¹ u``).
         multipliers: ``λ`` of eq. D.7.
-        schur_condition_number: ``σ_max / σ_min`` of ``C M⁻¹ Cᵀ`` (1 if no rows).
-        constraint_residual: ``‖C x − d‖``.
+        objective_damping: λ_obj used on the objective stack.
+        constraint_damping: λ_con used on the Schur complement.
+        objective_condition_number: Condition number of the damped ``M``.
+        schur_condition_number: Condition number of ``C M⁻¹ Cᵀ`` before damping.
+        constraint_residual: ``‖C x − d‖`` (non-zero only where damped).
         solve_time_s: Time spent solving (s).
     """
 
     found: bool
     x: np.ndarray
+    x_free: np.ndarray
     multipliers: np.ndarray
+    objective_damping: float
+    constraint_damping: float
+    objective_condition_number: float
     schur_condition_number: float
     constraint_residual: float
     solve_time_s: float
 
 
 def build_weighted_problem(
-    objectives: Sequence[Objective], equality: Equality, regularization: float
+    objectives: Sequence[Objective],
+    equality: Equality,
+    objective_gain_bound: float = 500.0,
+    constraint_gain_bound: float = 1e3,
 ) -> WeightedProblem:
     """Stack objectives into ``M`` and ``u`` (eq. D.7–D.8 notation).
 
     Args:
         objectives: Weighted rows over the same unknowns.
         equality: Hard constraint rows.
-        regularization: ``ε ≥ 0`` added to the diagonal of ``M``.
+        objective_gain_bound: ``B_obj`` (see module docstring).
+        constraint_gain_bound: ``B_con``.
     """
     start = time.perf_counter()
     n = equality.C.shape[1]
-    hessian = regularization * np.eye(n)
+    hessian = np.zeros((n, n))
     gradient = np.zeros(n)
     for objective in objectives:
         weighted_A = objective.weight[:, None] * objective.A
         hessian += objective.A.T @ weighted_A
         gradient += weighted_A.T @ objective.b
     return WeightedProblem(
-        hessian, gradient, equality, tuple(objectives), time.perf_counter() - start
+        hessian,
+        gradient,
+        equality,
+        tuple(objectives),
+        objective_gain_bound,
+        constraint_gain_bound,
+        time.perf_counter() - start,
     )
 
 
@@ -100,32 +129,53 @@ def solve_weighted_kkt(problem: WeightedProblem) -> KKTSolution:
     start = time.perf_counter()
     C, d = problem.equality.C, problem.equality.d
     n = problem.gradient.size
+    eigenvalues = np.linalg.eigvalsh(problem.hessian)
+    sigma_min = math.sqrt(max(float(eigenvalues[0]), 0.0))
+    objective_damping = damping_for_gain_bound(sigma_min, problem.objective_gain_bound)
+    hessian = problem.hessian + objective_damping**2 * np.eye(n)
+    damped_eigenvalues = eigenvalues + objective_damping**2
+    objective_condition = (
+        float(damped_eigenvalues[-1] / damped_eigenvalues[0])
+        if damped_eigenvalues[0] > 0
+        else math.inf
+    )
     try:
-        factor = scipy.linalg.cho_factor(problem.hessian, check_finite=False)
+        factor = scipy.linalg.cho_factor(hessian, check_finite=False)
     except np.linalg.LinAlgError:
-        return KKTSolution(False, np.zeros(n), np.zeros(len(d)), np.inf, np.inf, 0.0)
+        failed = np.zeros(n)
+        return KKTSolution(
+            False,
+            failed,
+            failed,
+            np.zeros(len(d)),
+            objective_damping,
+            0.0,
+            math.inf,
+            math.inf,
+            math.inf,
+            time.perf_counter() - start,
+        )
     x_free = scipy.linalg.cho_solve(factor, problem.gradient, check_finite=False)
     if C.shape[0] == 0:
-        multipliers = np.zeros(0)
-        condition = 1.0
-        x = x_free
+        multipliers, constraint_damping, schur_condition, x = np.zeros(0), 0.0, 1.0, x_free
     else:
         M_inv_CT = scipy.linalg.cho_solve(factor, C.T, check_finite=False)
-        schur = C @ M_inv_CT
-        eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (schur + schur.T))
-        largest = max(float(eigenvalues[-1]), 0.0)
-        keep = eigenvalues > SCHUR_RELATIVE_CUTOFF * largest
-        condition = largest / eigenvalues[0] if eigenvalues[0] > 0 else np.inf
-        rhs = eigenvectors.T @ (d - C @ x_free)
-        multipliers = eigenvectors[:, keep] @ (rhs[keep] / eigenvalues[keep])
+        multipliers, constraint_damping, schur_condition = damped_solve_psd(
+            C @ M_inv_CT, d - C @ x_free, problem.constraint_gain_bound
+        )
         x = x_free + M_inv_CT @ multipliers
     found = bool(np.all(np.isfinite(x)))
-    residual = float(np.linalg.norm(C @ x - d)) if found else np.inf
+    if not found:
+        x = np.zeros(n)
     return KKTSolution(
-        found,
-        x if found else np.zeros(n),
-        multipliers,
-        float(condition),
-        residual,
-        time.perf_counter() - start,
+        found=found,
+        x=x,
+        x_free=x_free,
+        multipliers=multipliers,
+        objective_damping=objective_damping,
+        constraint_damping=constraint_damping,
+        objective_condition_number=objective_condition,
+        schur_condition_number=float(schur_condition),
+        constraint_residual=float(np.linalg.norm(C @ x - d)) if found else math.inf,
+        solve_time_s=time.perf_counter() - start,
     )

@@ -48,6 +48,7 @@ def test_thousand_round_trips_are_dynamically_consistent(server, which, tmp_path
                 assert np.all(np.isfinite(array))
             assert np.all(np.abs(command.joint_torque) <= limits + 1e-9)
             worst = max(worst, checker.residual(state, command))
+            assert checker.point_force_mismatch < 1e-6
         assert worst < 1e-6, f"inverse-dynamics residual {worst:.3g}"
         stats = {s.session_id: s for s in client.stats()}
         assert stats[welcome.session_id].ticks == ROUND_TRIPS

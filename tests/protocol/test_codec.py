@@ -14,7 +14,7 @@ FUZZ = settings(max_examples=4000, deadline=None, suppress_health_check=[HealthC
 
 def _equal(a, b):
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return np.array_equal(np.asarray(a), np.asarray(b))
+        return np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)
     if hasattr(type(a), "model_fields"):
         return type(a) is type(b) and all(
             _equal(getattr(a, k), getattr(b, k)) for k in type(a).model_fields

@@ -1,0 +1,488 @@
+"""Momentum-based balance controller (Macchietto 2008), robust by damped least squares.
+
+Per optimizer tick, over ``x = q̈`` (eq. 5.1)::
+
+    min  β_t C_t + β_bl C_bl + β_ba C_ba + Σ C_p
+    s.t. J_sup q̈ + J̇_sup q̇ = 0          (supporting feet keep the ground's acceleration)
+
+* ``C_t`` tracking toward a fixed pose or a motion clip (eq. 5.3–5.4), with
+  per-joint weights and gains raised by soft joint limits (eq. 6.5–6.6);
+* ``C_bl`` linear momentum toward ``c_des`` over the supports (eq. 5.9–5.10);
+* ``C_ba`` angular momentum held (eq. 5.15–5.16), weight ``γ ‖p − g‖`` (eq. 5.17);
+* ``C_p`` soft point-acceleration targets (eq. 6.1–6.3), added at run time;
+
+solved by the closed-form KKT of App. D with damped least squares
+(Maciejewski 1990). The optimizer may run every N-th tick (thesis ch. 4:
+30–200 Hz); floating-base inverse dynamics (eq. 4.2) runs every tick on the
+latest accelerations, with measured or distributed ground forces.
+
+``tracking`` is the same controller with both momentum objectives off: the
+thesis' baseline, and the first ablation of ch. 7.1.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+import pinocchio as pin
+
+from controller_server.balance_points import (
+    center_of_pressure,
+    centroidal_moment_pivot,
+    support_polygon,
+)
+from controller_server.constraints import compute_support_equalities
+from controller_server.controllers.base import (
+    ControlInput,
+    Controller,
+    ControlOutput,
+    ParamSpec,
+    vector_value,
+)
+from controller_server.dynamics import DynamicsTerms, compute_dynamics_terms, point_kinematics
+from controller_server.errors import InvalidParams
+from controller_server.features import (
+    MotionClip,
+    Objective,
+    PointTarget,
+    angular_momentum_weight,
+    compute_angular_momentum_objective,
+    compute_linear_momentum_objective,
+    compute_point_objective,
+    compute_tracking_objective,
+    default_joint_limits,
+    desired_linear_momentum_rate,
+    joint_limit_errors,
+    load_motion_clip,
+    soft_limit_gains,
+)
+from controller_server.inverse_dynamics import InverseDynamicsResult, solve_inverse_dynamics
+from controller_server.models import RobotModel
+from controller_server.solvers import KKTSolution, build_weighted_problem, solve_weighted_kkt
+
+__all__ = ["MomentumController", "TrackingController"]
+
+POINT_PREFIX = "point:"
+POINT_DEFAULTS: dict[str, Any] = {
+    "offset_in_frame": [0.0, 0.0, 0.0],
+    "target_velocity_in_world": [0.0, 0.0, 0.0],
+    "stiffness": 100.0,
+    "damping": 20.0,
+    "weight": 1.0,
+}
+
+
+class MomentumController(Controller):
+    """Macchietto's weighted momentum-based balance controller."""
+
+    name = "momentum"
+    PARAMETERS: ClassVar[dict[str, ParamSpec]] = {
+        "stiffness": ParamSpec(100.0, minimum=0.0, maximum=1e5, doc="k_s of eq. 5.3 (1/s²)"),
+        "damping": ParamSpec(20.0, minimum=0.0, maximum=1e4, doc="k_d of eq. 5.3 (1/s)"),
+        "weight_tracking": ParamSpec(1.0, minimum=0.0, maximum=1e6, doc="β_t of eq. 5.1 (1)"),
+        "joint_weights": ParamSpec(
+            None,
+            kind="vector",
+            minimum=0.0,
+            maximum=1e6,
+            doc="W_t² per joint DoF, wire order (default all 1)",
+        ),
+        "weight_root_orientation": ParamSpec(
+            1.0, minimum=0.0, maximum=1e6, doc="W_t² on the root orientation DoFs (1)"
+        ),
+        "reference_joint_position": ParamSpec(
+            None,
+            kind="vector",
+            minimum=-1e3,
+            maximum=1e3,
+            doc="fixed reference pose, wire joint order (rad; ball: xyzw); default neutral",
+        ),
+        "reference_base_orientation_xyzw": ParamSpec(
+            [0.0, 0.0, 0.0, 1.0],
+            kind="vector",
+            minimum=-1.0,
+            maximum=1.0,
+            doc="reference root orientation in world, scalar last",
+        ),
+        "clip": ParamSpec(
+            "", kind="text", doc="motion clip to track: built-in name or server path ('' = pose)"
+        ),
+        "clip_start_s": ParamSpec(
+            0.0, minimum=-1e9, maximum=1e9, doc="state time of clip start (s)"
+        ),
+        "clip_speed": ParamSpec(1.0, minimum=0.0, maximum=100.0, doc="playback rate (1)"),
+        "clip_loop": ParamSpec(False, kind="bool", doc="repeat the clip"),
+        "joint_limit_stiffness": ParamSpec(
+            200.0, minimum=0.0, maximum=1e6, doc="l_s of eq. 6.5 (1/s² per rad of violation)"
+        ),
+        "joint_limit_damping": ParamSpec(
+            20.0, minimum=0.0, maximum=1e6, doc="l_d of eq. 6.6 (1/s per rad of violation)"
+        ),
+        "weight_linear_momentum": ParamSpec(
+            1.0, minimum=0.0, maximum=1e6, doc="β_bl of eq. 5.1 on CM-acceleration rows (1)"
+        ),
+        "momentum_stiffness": ParamSpec(
+            20.0, minimum=0.0, maximum=1e4, doc="k_s of eq. 5.9 (1/s²)"
+        ),
+        "momentum_damping": ParamSpec(9.0, minimum=0.0, maximum=1e4, doc="k_d of eq. 5.9 (1/s)"),
+        "com_offset_xy": ParamSpec(
+            [0.0, 0.0],
+            kind="vector",
+            minimum=-10.0,
+            maximum=10.0,
+            doc="c_des − s on x, y: desired CM relative to the support centre (m)",
+        ),
+        "angular_momentum_gain": ParamSpec(
+            10.0, minimum=0.0, maximum=1e6, doc="γ of eq. 5.17 (1/m)"
+        ),
+        "ground_force_mode": ParamSpec(
+            "distributed",
+            kind="choice",
+            choices=("distributed", "measured"),
+            doc="inverse dynamics with distributed forces, or the state's measured wrenches",
+        ),
+        "ground_height": ParamSpec(0.0, minimum=-1e3, maximum=1e3, doc="ground plane z (m)"),
+        "optimizer_period_ticks": ParamSpec(
+            1,
+            kind="int",
+            minimum=1,
+            maximum=1000,
+            doc="run the optimizer every N-th state; inverse dynamics runs every state",
+        ),
+        "objective_gain_bound": ParamSpec(
+            500.0,
+            minimum=1.0,
+            maximum=1e9,
+            doc="B of the damped objective solve (Maciejewski eq. 18); λ ≤ 1/(2B)",
+        ),
+        "constraint_gain_bound": ParamSpec(
+            1000.0,
+            minimum=1.0,
+            maximum=1e9,
+            doc="B of the damped constraint solve: ‖Δq̈‖_M ≤ B ‖J_sup q̈ + J̇ q̇‖",
+        ),
+        "force_regularization": ParamSpec(
+            1e-6,
+            minimum=1e-12,
+            maximum=1.0,
+            doc="ε on ‖f‖² when the cones cannot balance exactly (1/N²)",
+        ),
+        "qp_solver": ParamSpec(
+            "daqp",
+            kind="choice",
+            choices=("daqp", "quadprog", "proxqp"),
+            doc="QP solver for contact forces (via qpsolvers)",
+        ),
+    }
+
+    def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
+        self._data = robot.model.createData()
+        self._limits = default_joint_limits(robot)
+        self._clip: MotionClip | None = None
+        self._points: dict[str, PointTarget] = {}
+        self._ticks = 0
+        self._last_solution: KKTSolution | None = None
+        self._last_flags: tuple[bool, ...] | None = None
+        self._last_wrenches: np.ndarray | None = None
+        self._last_optimizer: dict[str, Any] = {}
+        super().__init__(robot, params)
+
+    # Parameters -----------------------------------------------------------------
+
+    def default_value(self, key: str) -> Any:
+        """Reference pose defaults to the neutral pose, joint weights to ones."""
+        if key == "reference_joint_position":
+            return pin.neutral(self.robot.model)[7:]
+        if key == "joint_weights":
+            return np.ones(self.robot.nv_joints)
+        return super().default_value(key)
+
+    def parameters(self) -> dict[str, Any]:
+        """Every parameter, with point targets as ``point:<name>`` records."""
+        values = super().parameters()
+        for name, target in self._points.items():
+            values[POINT_PREFIX + name] = {
+                "frame": target.frame,
+                "offset_in_frame": target.offset_in_frame.tolist(),
+                "target_position_in_world": target.target_position_in_world.tolist(),
+                "target_velocity_in_world": target.target_velocity_in_world.tolist(),
+                "stiffness": target.stiffness,
+                "damping": target.damping,
+                "weight": target.weight,
+            }
+        return values
+
+    def set_params(self, params: Mapping[str, Any]) -> None:
+        """Validate everything first (all or nothing), then apply, points included."""
+        points = {k: v for k, v in params.items() if k.startswith(POINT_PREFIX)}
+        rest = {k: v for k, v in params.items() if not k.startswith(POINT_PREFIX)}
+        validated_points = {k[len(POINT_PREFIX) :]: self._point(k, v) for k, v in points.items()}
+        clip = self._clip
+        if "clip" in rest and isinstance(rest["clip"], str):
+            clip = load_motion_clip(rest["clip"], self.robot) if rest["clip"] else None
+        super().set_params(rest)
+        self._clip = clip
+        for name, target in validated_points.items():
+            if target is None:
+                self._points.pop(name, None)
+            else:
+                self._points[name] = target
+
+    def _point(self, key: str, value: Any) -> PointTarget | None:
+        field = f"params.{key}"
+        if value is None:
+            return None
+        if not isinstance(value, dict):
+            raise InvalidParams(
+                field, "a point target is a map (frame, target_position_in_world, …)"
+            )
+        unknown = set(value) - {"frame", "target_position_in_world", *POINT_DEFAULTS}
+        if unknown:
+            raise InvalidParams(field, f"unknown keys {sorted(unknown)}")
+        frame = value.get("frame")
+        if not isinstance(frame, str) or not self.robot.model.existFrame(frame):
+            frames = [f.name for f in self.robot.model.frames]
+            raise InvalidParams(f"{field}.frame", f"{frame=!r} is not a frame; available: {frames}")
+        merged = {**POINT_DEFAULTS, **value}
+        scalars = {}
+        for name in ("stiffness", "damping", "weight"):
+            number = merged[name]
+            if isinstance(number, bool) or not isinstance(number, int | float):
+                raise InvalidParams(f"{field}.{name}", f"{number!r} is not a number")
+            if not np.isfinite(number) or number < 0:
+                raise InvalidParams(f"{field}.{name}", f"{number!r} must be finite and ≥ 0")
+            scalars[name] = float(number)
+        if "target_position_in_world" not in value:
+            raise InvalidParams(f"{field}.target_position_in_world", "required")
+        return PointTarget(
+            frame=frame,
+            offset_in_frame=vector_value(f"{field}.offset_in_frame", merged["offset_in_frame"], 3),
+            target_position_in_world=vector_value(
+                f"{field}.target_position_in_world", merged["target_position_in_world"], 3
+            ),
+            target_velocity_in_world=vector_value(
+                f"{field}.target_velocity_in_world", merged["target_velocity_in_world"], 3
+            ),
+            **scalars,
+        )
+
+    def _validate(self, key: str, value: Any) -> Any:
+        array = super()._validate(key, value)
+        if key in ("reference_joint_position", "reference_base_orientation_xyzw"):
+            # Quaternions (root and ball joints) are normalised through Pinocchio.
+            q = pin.neutral(self.robot.model)
+            target = slice(7, None) if key == "reference_joint_position" else slice(3, 7)
+            q[target] = array
+            if np.linalg.norm(q[3:7]) < 1e-9:
+                raise InvalidParams(f"params.{key}", "quaternion must be non-zero")
+            array = pin.normalize(self.robot.model, q)[target]
+        return array
+
+    # One tick -------------------------------------------------------------------
+
+    def compute(self, control_input: ControlInput) -> ControlOutput:
+        """Optimizer (every N-th tick or when supports change), then inverse dynamics."""
+        p = self._params
+        terms = compute_dynamics_terms(self.robot, self._data, control_input.q, control_input.v)
+        measured = p["ground_force_mode"] == "measured"
+        if measured and control_input.contact_wrench_in_world is None:
+            raise InvalidParams(
+                "contact_wrench_in_world", "required in ground_force_mode 'measured'"
+            )
+        flags = control_input.contact_flags
+        run_optimizer = (
+            self._last_solution is None
+            or flags != self._last_flags
+            or self._ticks % p["optimizer_period_ticks"] == 0
+        )
+        self._ticks += 1
+        if run_optimizer:
+            wrenches = control_input.contact_wrench_in_world if measured else self._last_wrenches
+            self._optimize(control_input, terms, wrenches)
+        solution = self._last_solution
+        assert solution is not None
+        dynamics = solve_inverse_dynamics(
+            terms,
+            solution.x,
+            flags,
+            [c.friction_coefficient for c in self.robot.contacts],
+            self.robot.torque_limit,
+            measured_wrenches=control_input.contact_wrench_in_world if measured else None,
+            force_regularization=p["force_regularization"],
+            qp_solver=p["qp_solver"],
+        )
+        self._last_wrenches = dynamics.contact_wrench_in_world
+        return ControlOutput(
+            acceleration=dynamics.acceleration,
+            joint_torque=dynamics.joint_torque,
+            contact_force_in_world=dynamics.contact_force_in_world,
+            contact_wrench_in_world=dynamics.contact_wrench_in_world,
+            diagnostics=self._diagnostics(terms, dynamics, flags, run_optimizer),
+        )
+
+    def _reference(self, control_input: ControlInput) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        p, model = self._params, self.robot.model
+        if self._clip is not None:
+            sample = self._clip.sample(
+                control_input.time_s,
+                start_s=p["clip_start_s"],
+                speed=p["clip_speed"],
+                loop=p["clip_loop"],
+            )
+            q_ref, v_ref, a_ref = sample.q.copy(), sample.v, sample.a
+        else:
+            q_ref = pin.neutral(model)
+            q_ref[3:7] = p["reference_base_orientation_xyzw"]
+            q_ref[7:] = p["reference_joint_position"]
+            v_ref = a_ref = np.zeros(model.nv)
+        q_ref[:3] = control_input.q[:3]  # the root position is left to the balance objectives
+        return q_ref, v_ref, a_ref
+
+    def _optimize(
+        self, control_input: ControlInput, terms: DynamicsTerms, wrenches: np.ndarray | None
+    ) -> None:
+        p, model = self._params, self.robot.model
+        q, v, flags = control_input.q, control_input.v, control_input.contact_flags
+        q_ref, v_ref, a_ref = self._reference(control_input)
+        errors = joint_limit_errors(self._limits, q, model.nv)
+        stiffness, damping = soft_limit_gains(
+            p["stiffness"],
+            p["damping"],
+            p["joint_limit_stiffness"],
+            p["joint_limit_damping"],
+            errors,
+        )
+        weight = np.concatenate(
+            [
+                np.zeros(3),
+                np.full(3, p["weight_root_orientation"]),
+                p["weight_tracking"] * np.asarray(p["joint_weights"]),
+            ]
+        )
+        objectives = [
+            compute_tracking_objective(model, q, v, q_ref, v_ref, a_ref, stiffness, damping, weight)
+        ]
+
+        momentum, mass = terms.momentum, terms.total_mass
+        support_frames = terms.position_contact_frames_in_world[list(flags)]
+        desired_rate = np.full(3, np.nan)
+        if len(support_frames) and p["weight_linear_momentum"] > 0:
+            support_velocity = np.mean(
+                [J[:3] @ v for J, on in zip(terms.support_jacobians, flags, strict=True) if on],
+                axis=0,
+            )
+            com_desired = support_frames.mean(axis=0)
+            com_desired[:2] += p["com_offset_xy"]
+            desired_rate = desired_linear_momentum_rate(
+                momentum,
+                mass,
+                terms.position_com_in_world,
+                com_desired,
+                support_velocity,
+                p["momentum_stiffness"],
+                p["momentum_damping"],
+            )
+            objectives.append(
+                compute_linear_momentum_objective(
+                    momentum, mass, desired_rate, p["weight_linear_momentum"]
+                )
+            )
+        cop, cmp_ = self._ground_points(terms, wrenches, flags)
+        angular_weight = angular_momentum_weight(p["angular_momentum_gain"], cop, cmp_)
+        if angular_weight > 0:
+            objectives.append(compute_angular_momentum_objective(momentum, mass, angular_weight))
+        for name, target in self._points.items():
+            point = point_kinematics(
+                model, self._data, model.getFrameId(target.frame), target.offset_in_frame[None, :]
+            )
+            objectives.append(compute_point_objective(name, target, point))
+
+        problem = build_weighted_problem(
+            objectives,
+            compute_support_equalities(terms, flags),
+            p["objective_gain_bound"],
+            p["constraint_gain_bound"],
+        )
+        solution = solve_weighted_kkt(problem)
+        self._last_solution = solution
+        self._last_flags = flags
+        self._last_optimizer = {
+            "objectives": objectives,
+            "linear_momentum_rate_desired": desired_rate,
+            "angular_momentum_weight": angular_weight,
+        }
+
+    def _ground_points(
+        self, terms: DynamicsTerms, wrenches: np.ndarray | None, flags: tuple[bool, ...]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """COP and CMP of the given contact wrenches (NaN without ground force)."""
+        if wrenches is None:
+            nan = np.full(3, np.nan)
+            return nan, nan
+        wrenches = np.asarray(wrenches).reshape(-1, 6)
+        origins = terms.position_contact_frames_in_world
+        reference = origins[list(flags)].mean(axis=0) if any(flags) else origins.mean(axis=0)
+        force = wrenches[:, :3].sum(axis=0)
+        torque = (wrenches[:, 3:] + np.cross(origins - reference, wrenches[:, :3])).sum(axis=0)
+        height = self._params["ground_height"]
+        return (
+            center_of_pressure(force, torque, reference, height),
+            centroidal_moment_pivot(terms.position_com_in_world, force, height),
+        )
+
+    def _diagnostics(
+        self,
+        terms: DynamicsTerms,
+        dynamics: InverseDynamicsResult,
+        flags: tuple[bool, ...],
+        optimizer_ran: bool,
+    ) -> dict[str, Any]:
+        solution = self._last_solution
+        assert solution is not None
+        momentum, acceleration = terms.momentum, dynamics.acceleration
+        objectives: list[Objective] = self._last_optimizer["objectives"]
+        cop, cmp_ = self._ground_points(terms, dynamics.contact_wrench_in_world, flags)
+        supporting = [
+            pts for pts, on in zip(terms.position_points_in_world, flags, strict=True) if on
+        ]
+        polygon = support_polygon(np.vstack(supporting)) if supporting else np.zeros((0, 2))
+        return {
+            "optimizer_ran": optimizer_ran,
+            "position_com_in_world": terms.position_com_in_world,
+            "velocity_com_in_world": momentum.linear_momentum / terms.total_mass,
+            "linear_momentum": momentum.linear_momentum,
+            "angular_momentum": momentum.angular_momentum,
+            "linear_momentum_rate_desired": self._last_optimizer["linear_momentum_rate_desired"],
+            "linear_momentum_rate_achieved": momentum.R @ acceleration + momentum.r_bias,
+            "angular_momentum_rate_desired": np.zeros(3),
+            "angular_momentum_rate_achieved": momentum.S @ acceleration + momentum.s_bias,
+            "center_of_pressure": cop,
+            "centroidal_moment_pivot": cmp_,
+            "support_polygon_xy": polygon.reshape(-1),
+            "angular_momentum_weight": self._last_optimizer["angular_momentum_weight"],
+            "objective_residuals": {o.name: o.residual(acceleration) for o in objectives},
+            "objective_condition_number": solution.objective_condition_number,
+            "schur_condition_number": solution.schur_condition_number,
+            "objective_damping": solution.objective_damping,
+            "constraint_damping": solution.constraint_damping,
+            "constraint_residual": solution.constraint_residual,
+            "root_wrench_residual": dynamics.root_wrench_residual,
+            "saturated_joints": dynamics.saturated_joints,
+        }
+
+
+class TrackingController(MomentumController):
+    """The baseline: tracking under the support constraint, no momentum objectives."""
+
+    name = "tracking"
+    PARAMETERS: ClassVar[dict[str, ParamSpec]] = {
+        **MomentumController.PARAMETERS,
+        "weight_linear_momentum": ParamSpec(
+            0.0, minimum=0.0, maximum=1e6, doc="β_bl of eq. 5.1 (off in the baseline)"
+        ),
+        "angular_momentum_gain": ParamSpec(
+            0.0, minimum=0.0, maximum=1e6, doc="γ of eq. 5.17 (off in the baseline)"
+        ),
+    }

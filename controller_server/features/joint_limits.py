@@ -1,0 +1,234 @@
+"""Soft joint limits: limit violations that stiffen the tracking gains.
+
+Macchietto 2008, §6.2: rather than constraining the joints, the tracking
+gains of eq. 5.3 are raised on a joint in proportion to how far it is past its
+limits (eq. 6.5–6.6)::
+
+    k'_s = k_s + l_s (e_axis + e_twist)
+    k'_d = k_d + l_d (e_axis + e_twist)
+
+Ball joints are limited by a swing cone on the bone axis (``e_axis``) and a
+twist interval (``e_twist``), see :mod:`controller_server.features.swing_twist`;
+revolute and prismatic joints by a box on their coordinate.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from controller_server.errors import ModelError
+from controller_server.features.swing_twist import SwingCone, rotate, swing_twist, twist_angle
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+    from controller_server.models import RobotModel
+
+__all__ = [
+    "BallJointLimit",
+    "JointLimit",
+    "RevoluteJointLimit",
+    "default_joint_limits",
+    "joint_limit_errors",
+    "soft_limit_gains",
+]
+
+_MAX_DEFAULT_TWIST_RAD = math.pi / 2
+"""Default twist range is ±min(swing limit, π/2): MJCF ``range`` gives no twist bound."""
+
+
+def _box_violation(value: float, lower: float, upper: float) -> float:
+    """Distance of ``value`` outside ``[lower, upper]``, ``0`` inside."""
+    return max(lower - value, 0.0, value - upper)
+
+
+@dataclass(frozen=True, eq=False)
+class BallJointLimit:
+    """Swing cone and twist interval of a ball joint (Macchietto 2008, §6.2).
+
+    Attributes:
+        name: Joint name.
+        idx_q: Index of the joint's quaternion ``[x, y, z, w]`` in the full ``q``.
+        idx_v: Index of its 3 angular-velocity DoFs in the full ``v``.
+        bone_axis_in_parent: Unit bone axis ``a`` at rest, in the parent-side
+            joint frame (equal to the child frame at rest).
+        cone: Allowed directions of ``a' = q a q⁻¹``.
+        twist_lower_rad: ``α_l``, lowest twist about ``a``.
+        twist_upper_rad: ``α_u``, highest twist about ``a`` (``α_l < α_u``).
+    """
+
+    nv: ClassVar[int] = 3
+
+    name: str
+    idx_q: int
+    idx_v: int
+    bone_axis_in_parent: np.ndarray
+    cone: SwingCone
+    twist_lower_rad: float
+    twist_upper_rad: float
+
+    def __post_init__(self) -> None:
+        axis = np.array(self.bone_axis_in_parent, dtype=float)
+        norm = float(np.linalg.norm(axis)) if axis.shape == (3,) else 0.0
+        if not norm > 1e-12 or not math.isfinite(norm):
+            raise ValueError(f"joint {self.name!r}: bone axis must be a non-zero 3-vector, {axis=}")
+        if not self.twist_lower_rad < self.twist_upper_rad:
+            raise ValueError(
+                f"joint {self.name!r}: need twist_lower_rad < twist_upper_rad, got "
+                f"{self.twist_lower_rad=}, {self.twist_upper_rad=}"
+            )
+        axis /= norm
+        axis.setflags(write=False)
+        object.__setattr__(self, "bone_axis_in_parent", axis)
+
+    def error(self, q: np.ndarray) -> float:
+        """``e_axis + e_twist`` (rad) at configuration ``q`` (Macchietto 2008, §6.2).
+
+        ``e_twist`` is the distance of the twist angle ``φ`` outside
+        ``[α_l, α_u]`` and ``0`` inside; the thesis's ``min(|α_l − φ|, |α_u − φ|)``
+        equals it only outside the interval.
+        """
+        quaternion = np.asarray(q[self.idx_q : self.idx_q + 4], dtype=float)
+        axis_error_rad = self.cone.violation(rotate(quaternion, self.bone_axis_in_parent))
+        _, twist = swing_twist(quaternion, self.bone_axis_in_parent)
+        twist_rad = twist_angle(twist, self.bone_axis_in_parent)
+        twist_error_rad = _box_violation(twist_rad, self.twist_lower_rad, self.twist_upper_rad)
+        return axis_error_rad + twist_error_rad
+
+
+@dataclass(frozen=True)
+class RevoluteJointLimit:
+    """Box limit of a 1-DoF joint: rad for revolute, m for prismatic joints.
+
+    Attributes:
+        name: Joint name.
+        idx_q: Index of the joint coordinate in the full ``q``.
+        idx_v: Index of its DoF in the full ``v``.
+        lower: Lowest position.
+        upper: Highest position.
+    """
+
+    nv: ClassVar[int] = 1
+
+    name: str
+    idx_q: int
+    idx_v: int
+    lower: float
+    upper: float
+
+    def error(self, q: np.ndarray) -> float:
+        """Distance of the coordinate outside ``[lower, upper]``, ``0`` inside."""
+        return _box_violation(float(q[self.idx_q]), self.lower, self.upper)
+
+
+JointLimit = BallJointLimit | RevoluteJointLimit
+"""Any joint limit: both kinds have ``error(q)``, ``idx_v`` and ``nv``."""
+
+
+def default_joint_limits(robot: RobotModel) -> tuple[JointLimit, ...]:
+    """One limit per actuated joint, from the model file.
+
+    Ball joints: the bone axis points from the joint to the child body's centre
+    of mass (``model.inertias[joint].lever``; joint-frame ``−z`` if the centre
+    of mass is on the joint); the swing cone is
+    ``SwingCone.regular(axis, ball_swing_limit[name])`` (an 8-sided cone
+    inscribed in the circular limit); the twist interval is ``±min(swing, π/2)``
+    since MJCF gives no twist limit. Revolute and prismatic joints: the box
+    ``[lowerPositionLimit, upperPositionLimit]``.
+
+    Args:
+        robot: The robot; joint 1 is the free-flyer root and gets no limit.
+
+    Returns:
+        Limits in the order of ``robot.joints``.
+
+    Raises:
+        ModelError: A ball joint's swing limit is not positive.
+    """
+    model = robot.model
+    limits: list[JointLimit] = []
+    for info in robot.joints:
+        joint_id = model.getJointId(info.name)
+        joint = model.joints[joint_id]
+        if info.kind != "ball":
+            limits.append(
+                RevoluteJointLimit(
+                    name=info.name,
+                    idx_q=joint.idx_q,
+                    idx_v=joint.idx_v,
+                    lower=float(model.lowerPositionLimit[joint.idx_q]),
+                    upper=float(model.upperPositionLimit[joint.idx_q]),
+                )
+            )
+            continue
+        lever = np.asarray(model.inertias[joint_id].lever, dtype=float)
+        lever_length = float(np.linalg.norm(lever))
+        axis = lever / lever_length if lever_length > 1e-9 else np.array([0.0, 0.0, -1.0])
+        swing_rad = float(robot.ball_swing_limit.get(info.name, math.pi))
+        if not swing_rad > 0.0:
+            raise ModelError(f"ball joint {info.name!r} has {swing_rad=}; it must be > 0")
+        twist_rad = min(swing_rad, _MAX_DEFAULT_TWIST_RAD)
+        limits.append(
+            BallJointLimit(
+                name=info.name,
+                idx_q=joint.idx_q,
+                idx_v=joint.idx_v,
+                bone_axis_in_parent=axis,
+                cone=SwingCone.regular(axis, swing_rad),
+                twist_lower_rad=-twist_rad,
+                twist_upper_rad=twist_rad,
+            )
+        )
+    return tuple(limits)
+
+
+def joint_limit_errors(limits: Iterable[JointLimit], q: np.ndarray, nv: int) -> np.ndarray:
+    """Limit violation per DoF (Macchietto 2008, §6.2).
+
+    Each ball joint's ``e_axis + e_twist`` is written on all 3 of its DoFs,
+    since the tracking gains of the whole joint are raised; a 1-DoF joint gets
+    its box violation. DoFs without a limit (the free-flyer root) get ``0``.
+
+    Args:
+        limits: Joint limits, e.g. from :func:`default_joint_limits`.
+        q: Configuration, ``(nq,)``.
+        nv: Size of the velocity vector.
+
+    Returns:
+        ``(nv,)`` non-negative errors (rad, or m for prismatic joints).
+    """
+    errors = np.zeros(nv)
+    for limit in limits:
+        errors[limit.idx_v : limit.idx_v + limit.nv] = limit.error(q)
+    return errors
+
+
+def soft_limit_gains(
+    stiffness: float | np.ndarray,
+    damping: float | np.ndarray,
+    limit_stiffness: float | np.ndarray,
+    limit_damping: float | np.ndarray,
+    errors: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Tracking gains raised by the limit errors (Macchietto 2008, eq. 6.5–6.6).
+
+    ``k'_s = k_s + l_s e`` and ``k'_d = k_d + l_d e``, per DoF.
+
+    Args:
+        stiffness: ``k_s`` (1/s²), scalar or per DoF.
+        damping: ``k_d`` (1/s), scalar or per DoF.
+        limit_stiffness: ``l_s`` (1/s² per unit error), scalar or per DoF.
+        limit_damping: ``l_d`` (1/s per unit error), scalar or per DoF.
+        errors: ``(nv,)`` errors from :func:`joint_limit_errors`.
+
+    Returns:
+        ``(stiffness_per_dof, damping_per_dof)``, each ``(nv,)``.
+    """
+    e = np.asarray(errors, dtype=float)
+    stiffness_per_dof = np.broadcast_to(stiffness + np.multiply(limit_stiffness, e), e.shape)
+    damping_per_dof = np.broadcast_to(damping + np.multiply(limit_damping, e), e.shape)
+    return stiffness_per_dof.astype(float), damping_per_dof.astype(float)
