@@ -15,22 +15,23 @@ and angular acceleration ``αᵢ = J_ang,i q̈ + J̇_ang,i q̇`` (world axes):
 
   (the ``ṙᵢ × mᵢ vᵢ`` terms of eq. 5.13 sum to ``−ċ × m_T ċ = 0``).
 
-``Iᵢ`` is body i's inertia about its CM in world axes. The per-body
-Jacobians and drifts come from Pinocchio; the sums are the thesis' own.
+``Iᵢ`` is body i's inertia about its CM in world axes. Pinocchio supplies
+the kinematics (joint placements, velocities, zero-acceleration spatial
+accelerations, and the world-frame joint Jacobian); the sums over bodies are
+the thesis' own, evaluated for all bodies at once.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 import pinocchio as pin
 
-from controller_server.spatial import cross, skew
+from controller_server.spatial import cross
 
 __all__ = ["MomentumRates", "compute_momentum_rates"]
-
-WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,35 @@ class MomentumRates:
     angular_momentum: np.ndarray
 
 
+@dataclass(frozen=True)
+class _BodyTable:
+    """Constant per-body data of a model: which DoFs move each body, and its inertia."""
+
+    joint_ids: tuple[int, ...]
+    masses: np.ndarray
+    levers: np.ndarray  # (b, 3) CM in the joint frame
+    inertias: np.ndarray  # (b, 3, 3) about the CM, joint axes
+    ancestors: np.ndarray  # (b, nv) 1 where the DoF moves the body
+
+
+@cache
+def _body_table(model: pin.Model) -> _BodyTable:
+    ids = [j for j in range(1, model.njoints) if model.inertias[j].mass > 0.0]
+    ancestors = np.zeros((len(ids), model.nv))
+    for row, joint_id in enumerate(ids):
+        for support in model.supports[joint_id]:
+            if support > 0:
+                start = model.idx_vs[support]
+                ancestors[row, start : start + model.nvs[support]] = 1.0
+    return _BodyTable(
+        joint_ids=tuple(ids),
+        masses=np.array([model.inertias[j].mass for j in ids]),
+        levers=np.array([model.inertias[j].lever for j in ids]),
+        inertias=np.array([model.inertias[j].inertia for j in ids]),
+        ancestors=ancestors,
+    )
+
+
 def compute_momentum_rates(
     model: pin.Model, data: pin.Data, v: np.ndarray, position_com_in_world: np.ndarray
 ) -> MomentumRates:
@@ -61,45 +91,47 @@ def compute_momentum_rates(
 
     ``data`` must hold ``forwardKinematics(q, v, 0)`` and ``computeJointJacobians(q)``.
     """
-    nv = model.nv
-    R = np.zeros((3, nv))
-    S = np.zeros((3, nv))
-    r_bias = np.zeros(3)
-    s_bias = np.zeros(3)
-    for joint_id in range(1, model.njoints):
-        inertia = model.inertias[joint_id]
-        mass = inertia.mass
-        if mass <= 0.0:
-            continue
-        placement = data.oMi[joint_id]
-        rotation = placement.rotation
-        lever_in_world = rotation @ inertia.lever
-        jacobian = pin.getJointJacobian(model, data, joint_id, WORLD_ALIGNED)
-        jacobian_linear = jacobian[:3] - skew(lever_in_world) @ jacobian[3:]
-        jacobian_angular = jacobian[3:]
+    table = _body_table(model)
+    ids = table.joint_ids
+    rotations = np.array([data.oMi[j].rotation for j in ids])  # (b, 3, 3) joint → world
+    origins = np.array([data.oMi[j].translation for j in ids])
+    velocities = np.array([data.v[j].vector for j in ids])  # local [v; ω]
+    accelerations = np.array([data.a[j].vector for j in ids])  # local, q̈ = 0
 
-        velocity, acceleration = data.v[joint_id], data.a[joint_id]  # local, q̈ = 0
-        omega_local = velocity.angular
-        lever = inertia.lever
-        # Classical acceleration of the body CM at q̈ = 0 (App. C, eq. C.3), local axes.
-        com_drift_local = (
-            acceleration.linear
-            + cross(omega_local, velocity.linear)
-            + cross(acceleration.angular, lever)
-            + cross(omega_local, cross(omega_local, lever))
-        )
-        com_drift = rotation @ com_drift_local
-        angular_drift = rotation @ acceleration.angular
-        omega = rotation @ omega_local
-        inertia_in_world = rotation @ inertia.inertia @ rotation.T
-        offset = placement.translation + lever_in_world - position_com_in_world
+    positions = origins + np.einsum("bij,bj->bi", rotations, table.levers)  # body CMs, world
+    # World-frame Jacobian columns are spatial velocities at the world origin; the
+    # CM of body b moves with v + ω × x_b, through the DoFs that carry it.
+    jacobian_linear_world, jacobian_angular = data.J[:3].T, data.J[3:].T  # (nv, 3)
+    jacobian_angular_bodies = table.ancestors[:, :, None] * jacobian_angular[None]  # (b, nv, 3)
+    jacobian_linear_bodies = table.ancestors[:, :, None] * jacobian_linear_world[None] + cross(
+        jacobian_angular_bodies, positions[:, None, :]
+    )
 
-        R += mass * jacobian_linear
-        r_bias += mass * com_drift
-        S += mass * skew(offset) @ jacobian_linear + inertia_in_world @ jacobian_angular
-        s_bias += (
-            mass * cross(offset, com_drift)
-            + inertia_in_world @ angular_drift
-            + cross(omega, inertia_in_world @ omega)
-        )
+    # Classical CM acceleration at q̈ = 0 (App. C, eq. C.3), local axes, then world.
+    linear, omega_local = velocities[:, :3], velocities[:, 3:]
+    acceleration_linear, alpha_local = accelerations[:, :3], accelerations[:, 3:]
+    com_drift_local = (
+        acceleration_linear
+        + cross(omega_local, linear)
+        + cross(alpha_local, table.levers)
+        + cross(omega_local, cross(omega_local, table.levers))
+    )
+    com_drift = np.einsum("bij,bj->bi", rotations, com_drift_local)
+    angular_drift = np.einsum("bij,bj->bi", rotations, alpha_local)
+    omega = np.einsum("bij,bj->bi", rotations, omega_local)
+    inertia_world = rotations @ table.inertias @ rotations.transpose(0, 2, 1)
+    offsets = positions - position_com_in_world
+    masses = table.masses
+
+    R = np.einsum("b,bkx->xk", masses, jacobian_linear_bodies)
+    r_bias = masses @ com_drift
+    S = np.einsum(
+        "b,bkx->xk", masses, cross(offsets[:, None, :], jacobian_linear_bodies)
+    ) + np.einsum("bxy,bky->xk", inertia_world, jacobian_angular_bodies)
+    inertia_omega = np.einsum("bij,bj->bi", inertia_world, omega)
+    s_bias = (
+        masses @ cross(offsets, com_drift)
+        + np.einsum("bij,bj->i", inertia_world, angular_drift)
+        + cross(omega, inertia_omega).sum(axis=0)
+    )
     return MomentumRates(R, r_bias, S, s_bias, R @ v, S @ v)

@@ -93,11 +93,39 @@ class BallJointLimit:
         equals it only outside the interval.
         """
         quaternion = np.asarray(q[self.idx_q : self.idx_q + 4], dtype=float)
+        if self._within(quaternion):
+            return 0.0
         axis_error_rad = self.cone.violation(rotate(quaternion, self.bone_axis_in_parent))
         _, twist = swing_twist(quaternion, self.bone_axis_in_parent)
         twist_rad = twist_angle(twist, self.bone_axis_in_parent)
         twist_error_rad = _box_violation(twist_rad, self.twist_lower_rad, self.twist_upper_rad)
         return axis_error_rad + twist_error_rad
+
+    def _within(self, quaternion: np.ndarray) -> bool:
+        """Cheap test that both errors are zero (the common case), in scalar arithmetic."""
+        x, y, z, w = (float(c) for c in quaternion)
+        norm = math.sqrt(x * x + y * y + z * z + w * w)
+        x, y, z, w = x / norm, y / norm, z / norm, w / norm
+        ax, ay, az = (float(c) for c in self.bone_axis_in_parent)
+        # a' = a + w t + u × t with t = 2 u × a (rotation of the bone axis).
+        tx, ty, tz = 2 * (y * az - z * ay), 2 * (z * ax - x * az), 2 * (x * ay - y * ax)
+        bone = np.array(
+            [
+                ax + w * tx + y * tz - z * ty,
+                ay + w * ty + z * tx - x * tz,
+                az + w * tz + x * ty - y * tx,
+            ]
+        )
+        # Twist angle about a: 2 atan2(u·a, w), wrapped to (−π, π].
+        twist = 2.0 * math.atan2(x * ax + y * ay + z * az, w)
+        twist = (
+            twist - 2 * math.pi
+            if twist > math.pi
+            else twist + 2 * math.pi
+            if twist <= -math.pi
+            else twist
+        )
+        return self.twist_lower_rad <= twist <= self.twist_upper_rad and self.cone.contains(bone)
 
 
 @dataclass(frozen=True)
