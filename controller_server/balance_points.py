@@ -6,7 +6,6 @@ Flat ground at height ``h`` with normal +z (gravity −z), as in the thesis.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
 
 __all__ = ["center_of_pressure", "centroidal_moment_pivot", "support_polygon"]
 
@@ -62,16 +61,25 @@ def centroidal_moment_pivot(
 def support_polygon(points_in_world: np.ndarray) -> np.ndarray:
     """Convex hull (counter-clockwise ``(m, 2)`` x–y vertices) of the support points.
 
-    Fewer than three non-collinear points give the points' x–y extreme
-    segment (or the single point); no points give an empty array.
+    Andrew's monotone chain: a handful of points per tick, no Qhull call.
+    Collinear points give the segment's two ends; one point gives itself;
+    no points give an empty array.
     """
     xy = np.asarray(points_in_world, dtype=float).reshape(-1, 3)[:, :2]
-    if len(xy) < 3:
-        return xy.copy()
-    try:
-        hull = ConvexHull(xy)
-    except QhullError:  # collinear: keep the two extreme points of the segment
-        direction = xy[np.argmax(np.linalg.norm(xy - xy[0], axis=1))] - xy[0]
-        projection = xy @ direction
-        return xy[[int(np.argmin(projection)), int(np.argmax(projection))]]
-    return xy[hull.vertices]
+    points = sorted({(float(x), float(y)) for x, y in xy})
+    if len(points) <= 2:
+        return np.array(points).reshape(-1, 2)
+
+    def turn(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    def chain(ordered: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        hull: list[tuple[float, float]] = []
+        for point in ordered:
+            while len(hull) >= 2 and turn(hull[-2], hull[-1], point) <= 0.0:
+                hull.pop()
+            hull.append(point)
+        return hull
+
+    lower, upper = chain(points), chain(points[::-1])
+    return np.array(lower[:-1] + upper[:-1])

@@ -136,6 +136,8 @@ def compute_dynamics_terms(
     mass_matrix = np.triu(data.M) + np.triu(data.M, 1).T
     bias_forces = data.nle.copy()
     position_com = data.com[0].copy()
+    total_mass = float(data.mass[0])
+    momentum = compute_momentum_rates(model, data, q, v)
     # Drift terms: classical accelerations with q̈ = 0 (App. A, eq. A.9–A.10).
     pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
     pin.updateFramePlacements(model, data)
@@ -167,6 +169,6 @@ def compute_dynamics_terms(
         position_contact_frames_in_world=np.array(
             [data.oMf[c.frame_id].translation for c in robot.contacts]
         ).reshape(-1, 3),
-        momentum=compute_momentum_rates(model, data, v, position_com),
-        total_mass=float(data.mass[0]),
+        momentum=momentum,
+        total_mass=total_mass,
     )

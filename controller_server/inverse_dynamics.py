@@ -28,12 +28,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 import qpsolvers
 import scipy.linalg
 
 from controller_server.dynamics import DynamicsTerms
+from controller_server.spatial import cross
 
 __all__ = [
     "InverseDynamicsResult",
@@ -72,7 +74,14 @@ def friction_pyramid(friction_coefficients: Sequence[float]) -> np.ndarray:
     """Rows ``G`` of ``G f ≤ 0`` for point forces ``f = [f_x, f_y, f_z]`` per point.
 
     Five rows per point: ``±f_x − μ f_z ≤ 0``, ``±f_y − μ f_z ≤ 0``, ``−f_z ≤ 0``.
+    Built once per set of coefficients (the supports change rarely); the
+    caller gets a copy, since some solvers want writeable inputs.
     """
+    return _friction_pyramid(tuple(float(mu) for mu in friction_coefficients)).copy()
+
+
+@cache
+def _friction_pyramid(friction_coefficients: tuple[float, ...]) -> np.ndarray:
     count = len(friction_coefficients)
     rows = np.zeros((5 * count, 3 * count))
     for i, mu in enumerate(friction_coefficients):
@@ -201,14 +210,11 @@ def _wrenches_from_point_forces(
     terms: DynamicsTerms, forces: np.ndarray, counts: Sequence[int]
 ) -> np.ndarray:
     """Per contact: total force and torque about the contact frame origin."""
+    owner = np.repeat(np.arange(len(counts)), counts)
+    offsets = (
+        np.vstack(terms.position_points_in_world) - terms.position_contact_frames_in_world[owner]
+    )
+    per_point = np.hstack([forces, cross(offsets, forces)])
     wrenches = np.zeros((len(counts), 6))
-    start = 0
-    for index, (count, points) in enumerate(
-        zip(counts, terms.position_points_in_world, strict=True)
-    ):
-        contact_forces = forces[start : start + count]
-        offsets = points - terms.position_contact_frames_in_world[index]
-        wrenches[index, :3] = contact_forces.sum(axis=0)
-        wrenches[index, 3:] = np.cross(offsets, contact_forces).sum(axis=0)
-        start += count
+    np.add.at(wrenches, owner, per_point)
     return wrenches

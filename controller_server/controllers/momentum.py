@@ -61,6 +61,7 @@ from controller_server.features import (
 from controller_server.inverse_dynamics import InverseDynamicsResult, solve_inverse_dynamics
 from controller_server.models import RobotModel
 from controller_server.solvers import KKTSolution, build_weighted_problem, solve_weighted_kkt
+from controller_server.spatial import cross
 
 __all__ = ["MomentumController", "TrackingController"]
 
@@ -425,7 +426,7 @@ class MomentumController(Controller):
         origins = terms.position_contact_frames_in_world
         reference = origins[list(flags)].mean(axis=0) if any(flags) else origins.mean(axis=0)
         force = wrenches[:, :3].sum(axis=0)
-        torque = (wrenches[:, 3:] + np.cross(origins - reference, wrenches[:, :3])).sum(axis=0)
+        torque = (wrenches[:, 3:] + cross(origins - reference, wrenches[:, :3])).sum(axis=0)
         height = self._params["ground_height"]
         return (
             center_of_pressure(force, torque, reference, height),

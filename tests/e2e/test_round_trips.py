@@ -16,9 +16,14 @@ pytestmark = pytest.mark.e2e
 ROUND_TRIPS = 1000
 
 
-@pytest.mark.parametrize("which", [*BUILTIN_MODELS, "by_path", "by_text"])
+@pytest.mark.parametrize("which", [*BUILTIN_MODELS, "by_path", "by_text", "momentum"])
 def test_thousand_round_trips_are_dynamically_consistent(server, which, tmp_path):
-    if which == "by_path":
+    controller = "tracking"
+    if which == "momentum":  # the full controller, every objective on
+        path = BUILTIN_MODELS["thesis_humanoid"]
+        hello = {"model": "thesis_humanoid", "params": {"angular_momentum_gain": 50.0}}
+        controller = "momentum"
+    elif which == "by_path":
         path = tmp_path / "my_dino.xml"
         shutil.copy(BUILTIN_MODELS["dino_biped"], path)
         hello = {"model": str(path)}
@@ -30,7 +35,7 @@ def test_thousand_round_trips_are_dynamically_consistent(server, which, tmp_path
         hello = {"model": which}
     rng = np.random.default_rng(7)
     with ControllerClient(server.endpoint, timeout_s=10.0) as client:
-        welcome = client.connect(**hello)
+        welcome = client.connect(**hello, controller=controller)
         checker = IndependentDynamics(str(path), welcome)
         limits = np.concatenate([j.torque_limit for j in welcome.joints])
         worst = 0.0
