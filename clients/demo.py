@@ -2,7 +2,7 @@
 
 Until the reference simulator arrives, the demo runs the scripted client
 (:mod:`clients.scripted`): the thesis humanoid starts in a perturbed pose
-and follows the tracking controller's accelerations over ZeroMQ.
+and follows the controller's accelerations over ZeroMQ.
 """
 
 from __future__ import annotations
@@ -49,7 +49,13 @@ def plot_run(run: ScriptedRun, total_mass_kg: float, title: str, path: Path) -> 
     plt.close(figure)
 
 
-def run_demo(model: str, output_dir: Path, duration_s: float, endpoint: str | None = None) -> int:
+def run_demo(
+    model: str,
+    output_dir: Path,
+    duration_s: float,
+    endpoint: str | None = None,
+    controller: str = "momentum",
+) -> int:
     """Run the demo and print a summary; returns the process exit code."""
     output_dir.mkdir(parents=True, exist_ok=True)
     with contextlib.ExitStack() as stack:
@@ -57,7 +63,7 @@ def run_demo(model: str, output_dir: Path, duration_s: float, endpoint: str | No
             print("starting `poise serve` on a free loopback port …", flush=True)
             endpoint = stack.enter_context(ServerProcess()).endpoint
         client = stack.enter_context(ControllerClient(endpoint, timeout_s=10.0))
-        welcome = client.connect(model, client_name="poise demo")
+        welcome = client.connect(model, controller=controller, client_name="poise demo")
         print(
             f"connected to {endpoint}: {welcome.model_name}, {welcome.total_mass:.1f} kg, "
             f"{sum(j.nv for j in welcome.joints)} actuated DoF, controller {welcome.controller}",
@@ -67,7 +73,7 @@ def run_demo(model: str, output_dir: Path, duration_s: float, endpoint: str | No
         stats = client.stats()
 
     plot_path = output_dir / "demo.png"
-    title = f"{welcome.model_name}: tracking controller over ZeroMQ (scripted client)"
+    title = f"{welcome.model_name}: {welcome.controller} controller over ZeroMQ (scripted client)"
     plot_run(run, welcome.total_mass, title, plot_path)
     compute_ms = np.array(run.compute_time_s) * 1e3
     summary = {

@@ -93,6 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--model", default="thesis_humanoid", help="built-in model (default: thesis_humanoid)"
     )
     demo.add_argument(
+        "--controller",
+        default="momentum",
+        choices=["momentum", "tracking"],
+        help="controller to run (default: momentum)",
+    )
+    demo.add_argument(
         "--output",
         default="out",
         metavar="DIR",
