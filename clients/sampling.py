@@ -31,7 +31,8 @@ def random_state(
         if joint.kind == "ball":
             position[q_slice] = Rotation.from_rotvec(rng.normal(0, spread, 3)).as_quat()
         else:
-            lower, upper = joint.position_lower[0], joint.position_upper[0]
+            lower = joint.position_lower[0] if joint.position_lower else -np.inf
+            upper = joint.position_upper[0] if joint.position_upper else np.inf
             position[q_slice] = np.clip(rng.normal(0, spread), lower, upper)
     nv = sum(j.nv for j in joints)
     flags = [bool(f) for f in rng.random(len(welcome.contacts)) < 0.8]
