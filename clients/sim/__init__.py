@@ -1,0 +1,1 @@
+"""Simulator client: physics backends, scenarios, metrics."""

@@ -1,0 +1,95 @@
+"""The interface every physics backend of the simulator client implements.
+
+A backend integrates one robot on flat ground (z = ``ground_height_m``,
+normal +z, gravity −z) and speaks the wire conventions of
+``docs/protocol.md``: base pose in world, quaternions scalar-last,
+``linear_velocity_base_in_world``, ``angular_velocity_base_in_base``, joints
+in Pinocchio/MJCF tree order (the order the server announces in
+``welcome``; ball joints as quaternions xyzw of child in parent, their
+velocities in the child frame). Two backends implement it: the reference
+simulator (Pinocchio ABA with penalty contact) and MuJoCo.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+__all__ = ["ContactPoint", "PhysicsBackend", "Push", "SimState"]
+
+
+@dataclass
+class SimState:
+    """Robot state in wire conventions (the fields of a ``state`` message)."""
+
+    joint_position: np.ndarray
+    joint_velocity: np.ndarray
+    position_base_in_world: np.ndarray
+    orientation_base_in_world_xyzw: np.ndarray
+    linear_velocity_base_in_world: np.ndarray
+    angular_velocity_base_in_base: np.ndarray
+
+
+@dataclass(frozen=True)
+class ContactPoint:
+    """A foot contact point: the frame (MJCF site) it is fixed to and its offset there."""
+
+    contact: str
+    frame: str
+    point_in_frame: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Push:
+    """An external force on a body for a while (thesis ch. 7.1).
+
+    Attributes:
+        force_in_world_N: Force vector (N).
+        body: MJCF body name it acts on.
+        point_in_body_m: Application point in the body frame (m).
+        start_s: Simulation time it starts (s).
+        duration_s: How long it lasts (s).
+    """
+
+    force_in_world_N: tuple[float, float, float]
+    body: str
+    point_in_body_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    start_s: float = 0.0
+    duration_s: float = 0.1
+
+    def active(self, time_s: float) -> bool:
+        """Whether the push acts at ``time_s``."""
+        return self.start_s <= time_s < self.start_s + self.duration_s
+
+
+@dataclass
+class StepReport:
+    """What happened in one physics step (for metrics)."""
+
+    contact_flags: list[bool] = field(default_factory=list)
+    non_foot_contact: bool = False
+
+
+class PhysicsBackend(Protocol):
+    """One robot, one flat ground, fixed time step."""
+
+    name: str
+    time_s: float
+    timestep_s: float
+
+    def reset(self, state: SimState) -> None:
+        """Put the robot in ``state`` at time 0 (velocities included)."""
+
+    def state(self) -> SimState:
+        """Current state in wire conventions."""
+
+    def contact_flags(self) -> list[bool]:
+        """Per contact (welcome order): does any of its points touch the ground."""
+
+    def contact_wrenches_in_world(self) -> np.ndarray:
+        """``(contacts, 6)`` ground force and torque about each contact frame origin (N, N·m)."""
+
+    def step(self, joint_torque: np.ndarray, pushes: list[Push]) -> StepReport:
+        """Advance one time step with these joint torques (wire order) and active pushes."""

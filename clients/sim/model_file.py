@@ -1,0 +1,50 @@
+"""Model files for simulator backends: where built-ins live, where the feet touch.
+
+The simulator reads the same MJCF the server loads. It finds the built-in
+files by the ``controller_server`` package's location without importing it
+(a client talks to the server only through the protocol), and takes the
+foot contact points from the ``*_sole`` box sites exactly as the server does
+by default: the four corners of each site's x–y rectangle.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from clients.sim.backend import ContactPoint
+
+__all__ = ["builtin_model_path", "resolve_model_path", "sole_contact_points"]
+
+
+def builtin_model_path(name: str) -> Path:
+    """Path of a built-in MJCF model, e.g. ``thesis_humanoid``."""
+    spec = importlib.util.find_spec("controller_server")
+    if spec is None or not spec.submodule_search_locations:
+        raise FileNotFoundError("the controller_server package is not installed")
+    path = Path(next(iter(spec.submodule_search_locations))) / "models" / "data" / f"{name}.xml"
+    if not path.is_file():
+        raise FileNotFoundError(f"no built-in model {name!r} (looked for {path})")
+    return path
+
+
+def resolve_model_path(model: str) -> Path:
+    """A built-in name or a file path."""
+    path = Path(model)
+    return path if path.suffix and path.is_file() else builtin_model_path(model)
+
+
+def sole_contact_points(path: Path) -> list[ContactPoint]:
+    """Corners of every ``*_sole`` box site, contacts named ``<side>_foot`` (server order)."""
+    points = []
+    for site in ET.parse(path).getroot().iter("site"):
+        name = site.get("name", "")
+        if not name.endswith("_sole") or site.get("type") != "box":
+            continue
+        half_x, half_y = (float(s) for s in site.get("size", "0 0 0").split()[:2])
+        contact = name.removesuffix("_sole") + "_foot"
+        for sx in (1, -1):
+            for sy in (1, -1):
+                points.append(ContactPoint(contact, name, (sx * half_x, sy * half_y, 0.0)))
+    return points
