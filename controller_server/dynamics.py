@@ -30,7 +30,7 @@ import pinocchio as pin
 
 from controller_server.models import RobotModel
 from controller_server.momentum import MomentumRates, compute_momentum_rates
-from controller_server.spatial import cross
+from controller_server.spatial import skew, stacked_skew
 
 __all__ = ["DynamicsTerms", "PointKinematics", "compute_dynamics_terms", "point_kinematics"]
 
@@ -102,18 +102,19 @@ def point_kinematics(
     jacobian = pin.getFrameJacobian(model, data, frame_id, WORLD_ALIGNED)
     velocity = pin.getFrameVelocity(model, data, frame_id, WORLD_ALIGNED)
     drift = pin.getFrameClassicalAcceleration(model, data, frame_id, WORLD_ALIGNED)
-    offsets = points_in_frame @ data.oMf[frame_id].rotation.T
+    offsets = points_in_frame @ data.oMf[frame_id].rotation.T  # (k, 3), world axes
+    count = len(offsets)
+    # v_p = v_o + ω × r = v_o − [r]× ω, stacked over the k points: one (3k, 3) matrix.
+    lever = stacked_skew(offsets)
     omega = velocity.angular
-    # v_p = v_o + ω × r  and  a_p = a_o + α × r + ω × (ω × r), all points at once.
-    angular_rows = np.broadcast_to(jacobian[3:].T, (len(offsets), *jacobian[3:].T.shape))
-    lever_rows = cross(angular_rows, offsets[:, None, :])  # (k, nv, 3): J_ω × r
+    omega_twice = skew(omega) @ skew(omega)
+    # a_p = a_o + α × r + ω × (ω × r) at q̈ = 0 (App. C, eq. C.3 and C.7).
+    point_drift = (np.tile(drift.linear, count) - lever @ drift.angular).reshape(count, 3)
     return PointKinematics(
         position_in_world=data.oMf[frame_id].translation + offsets,
-        velocity_in_world=velocity.linear + cross(omega, offsets),
-        jacobian=(jacobian[None, :3, :] + lever_rows.transpose(0, 2, 1)).reshape(-1, model.nv),
-        drift=(
-            drift.linear + cross(drift.angular, offsets) + cross(omega, cross(omega, offsets))
-        ).reshape(-1),
+        velocity_in_world=(np.tile(velocity.linear, count) - lever @ omega).reshape(count, 3),
+        jacobian=np.tile(jacobian[:3], (count, 1)) - lever @ jacobian[3:],
+        drift=(point_drift + offsets @ omega_twice.T).reshape(-1),
     )
 
 

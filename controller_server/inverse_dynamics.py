@@ -113,6 +113,14 @@ def distribute_contact_forces(
     """
     n = G.shape[1]
     cones = friction_pyramid(friction_coefficients)
+    # The unconstrained minimum-norm balance f = Gᵀ (G Gᵀ)⁻¹ w solves the QP whenever
+    # it already lies in the cones (the common case when standing): no solver call.
+    try:
+        minimum_norm = G.T @ np.linalg.solve(G @ G.T, wrench)
+    except np.linalg.LinAlgError:
+        minimum_norm = None
+    if minimum_norm is not None and np.all(cones @ minimum_norm <= 1e-9 * max(1.0, abs(wrench[2]))):
+        return minimum_norm
     zeros = np.zeros(cones.shape[0])
     forces = qpsolvers.solve_qp(
         np.eye(n), np.zeros(n), cones, zeros, A=G, b=wrench, solver=qp_solver
