@@ -48,6 +48,33 @@ def _demo(args: argparse.Namespace) -> int:
     )
 
 
+def _sim(args: argparse.Namespace) -> int:
+    from clients.sim.app import ABLATIONS, run_scenarios, server_endpoint, sweep_push
+    from clients.sim.scenario import PushSpec, load_scenario
+
+    overrides = {}
+    if args.backend:
+        overrides["backend"] = args.backend
+    if args.controller:
+        overrides["controller"] = args.controller
+    if not args.sweep_push:
+        run_scenarios(args.scenarios, Path(args.output), args.connect, overrides)
+        return 0
+    push = PushSpec(
+        body=args.push_body,
+        force_in_world_N=tuple(args.push_direction),
+        start_s=args.push_start,
+        duration_s=args.push_duration,
+    )
+    with server_endpoint(args.connect) as endpoint:
+        for label, params in ABLATIONS.items():
+            base = load_scenario(args.scenarios[0], **overrides)
+            base = base.model_copy(update={"params": {**base.params, **params}, "pushes": []})
+            force_N = sweep_push(base, push, endpoint)
+            print(f"{label:<32} survives {force_N:7.1f} N = {force_N * push.duration_s:6.1f} N·s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``poise`` (also used to document the CLI)."""
     parser = argparse.ArgumentParser(
@@ -82,6 +109,44 @@ def build_parser() -> argparse.ArgumentParser:
         help="drop a session after this long without a request (default: 30)",
     )
     serve.set_defaults(handler=_serve)
+
+    sim = commands.add_parser(
+        "sim",
+        help="run scenarios in the simulator client against a server",
+        description="Run scenarios (built-in names or TOML files) with a physics backend as a "
+        "client of `poise serve`; write a JSON report and a PNG per scenario.",
+    )
+    sim.add_argument(
+        "scenarios",
+        nargs="*",
+        default=["push_sequence"],
+        help="scenario names or .toml paths (default: push_sequence)",
+    )
+    sim.add_argument("--backend", choices=["reference", "mujoco"], help="override the backend")
+    sim.add_argument(
+        "--controller", choices=["momentum", "tracking"], help="override the controller"
+    )
+    sim.add_argument("--output", default="out/sim", metavar="DIR", help="report directory")
+    sim.add_argument(
+        "--connect", default=None, metavar="ENDPOINT", help="use a running server at ENDPOINT"
+    )
+    sim.add_argument(
+        "--sweep-push",
+        action="store_true",
+        help="find by bisection the largest push each thesis ablation survives (first scenario)",
+    )
+    sim.add_argument("--push-body", default="chest", help="body pushed in the sweep")
+    sim.add_argument(
+        "--push-direction",
+        type=float,
+        nargs=3,
+        default=[1.0, 0.0, 0.0],
+        metavar=("X", "Y", "Z"),
+        help="push direction in world (normalised)",
+    )
+    sim.add_argument("--push-start", type=float, default=0.5, metavar="SECONDS")
+    sim.add_argument("--push-duration", type=float, default=0.1, metavar="SECONDS")
+    sim.set_defaults(handler=_sim)
 
     demo = commands.add_parser(
         "demo",

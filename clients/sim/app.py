@@ -1,0 +1,112 @@
+"""``poise sim``: run scenarios or a push sweep against a server, write reports and plots."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+from clients.server_process import ServerProcess
+from clients.sim.metrics import compute_metrics
+from clients.sim.plots import plot_run
+from clients.sim.runner import run_scenario
+from clients.sim.scenario import PushSpec, Scenario, load_scenario
+
+__all__ = ["ABLATIONS", "run_scenarios", "server_endpoint", "sweep_push"]
+
+ABLATIONS: dict[str, dict[str, Any]] = {
+    "tracking only": {"weight_linear_momentum": 0.0, "angular_momentum_gain": 0.0},
+    "+ linear momentum": {"angular_momentum_gain": 0.0},
+    "+ linear and angular momentum": {},
+}
+"""Thesis ch. 7.1 ablations of the momentum controller, as parameter overrides."""
+
+
+def _progress_bar(label: str) -> Callable[[float], None]:
+    def show(fraction: float) -> None:
+        filled = int(30 * fraction)
+        sys.stderr.write(f"\r{label:<28} [{'#' * filled}{'.' * (30 - filled)}] {fraction:4.0%}")
+        sys.stderr.flush()
+
+    return show
+
+
+@contextlib.contextmanager
+def server_endpoint(endpoint: str | None) -> Iterator[str]:
+    """Yield ``endpoint``, or start a `poise serve` process and yield its endpoint."""
+    if endpoint is not None:
+        yield endpoint
+        return
+    with ServerProcess() as process:
+        yield process.endpoint
+
+
+def run_scenarios(
+    names: Sequence[str],
+    output_dir: Path,
+    endpoint: str | None = None,
+    overrides: dict[str, Any] | None = None,
+    progress: bool = True,
+) -> list[dict[str, Any]]:
+    """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table."""
+    output_dir.mkdir(parents=True, exist_ok=True)
+    reports = []
+    with server_endpoint(endpoint) as address:
+        for name in names:
+            scenario = load_scenario(name, **(overrides or {}))
+            bar = _progress_bar(scenario.name) if progress else None
+            record = run_scenario(scenario, address, progress=bar)
+            if progress:
+                sys.stderr.write("\r" + " " * 70 + "\r")
+            metrics = compute_metrics(record)
+            plot_path = output_dir / f"{scenario.name}.png"
+            plot_run(record, plot_path)
+            metrics["plot"] = str(plot_path)
+            reports.append(metrics)
+    (output_dir / "report.json").write_text(json.dumps(reports, indent=2))
+    _print_table(reports)
+    return reports
+
+
+def _print_table(reports: list[dict[str, Any]]) -> None:
+    print(f"{'scenario':<22}{'backend':<10}{'result':<16}{'CM exc. m':>10}{'COP in':>8}{'RTF':>7}")
+    for r in reports:
+        result = f"fell {r['fall_time_s']:.2f} s" if r["fell"] else "stayed up"
+        print(
+            f"{r['scenario']:<22}{r['backend']:<10}{result:<16}{r['com_excursion_m']:>10.3f}"
+            f"{r['cop_strictly_inside_fraction']:>8.0%}{r['real_time_factor']:>7.2f}"
+        )
+
+
+def sweep_push(
+    base: Scenario,
+    push: PushSpec,
+    endpoint: str,
+    max_force_N: float = 2000.0,
+    tolerance_N: float = 5.0,
+) -> float:
+    """Largest push force (N) the scenario survives, by bisection (thesis ch. 7.1).
+
+    The push's direction is ``push.force_in_world_N`` normalised; its body,
+    point, start and duration are kept. Returns 0 if even the smallest push fells it.
+    """
+    direction = [
+        c / max(1e-12, sum(x * x for x in push.force_in_world_N) ** 0.5)
+        for c in push.force_in_world_N
+    ]
+
+    def survives(force_N: float) -> bool:
+        spec = push.model_copy(update={"force_in_world_N": tuple(force_N * d for d in direction)})
+        scenario = base.model_copy(update={"pushes": [spec]})
+        return not run_scenario(scenario, endpoint).fell
+
+    low, high = 0.0, max_force_N
+    if survives(high):
+        return high
+    while high - low > tolerance_N:
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if survives(middle) else (low, middle)
+    return low

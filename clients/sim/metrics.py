@@ -1,0 +1,88 @@
+"""Metrics of a simulated run: did it stay up, and how well did it track and balance."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from clients.layout import joint_slices
+from clients.sim.runner import RunRecord
+
+__all__ = ["JOINT_GROUPS", "compute_metrics", "strictly_inside"]
+
+JOINT_GROUPS = {
+    "legs": ("hip", "knee", "ankle"),
+    "arms": ("shoulder", "elbow", "wrist"),
+}
+"""Joint groups by name fragment; the rest is ``torso`` (back, neck, tail, …)."""
+
+
+def strictly_inside(point_xy: np.ndarray, polygon_xy: np.ndarray, margin_m: float = 1e-3) -> bool:
+    """Whether a point is inside a counter-clockwise convex polygon, ``margin_m`` from its edges."""
+    if len(polygon_xy) < 3 or not np.all(np.isfinite(point_xy)):
+        return False
+    edges = np.roll(polygon_xy, -1, axis=0) - polygon_xy
+    to_point = point_xy - polygon_xy
+    lengths = np.linalg.norm(edges, axis=1)
+    signed_distance = (edges[:, 0] * to_point[:, 1] - edges[:, 1] * to_point[:, 0]) / lengths
+    return bool(np.all(signed_distance > margin_m))
+
+
+def _group(name: str) -> str:
+    return next((g for g, words in JOINT_GROUPS.items() if any(w in name for w in words)), "torso")
+
+
+def _joint_errors_rad(record: RunRecord) -> dict[str, np.ndarray]:
+    """Per joint group, the deviation of every joint from its initial position over time."""
+    joints = list(record.welcome.joints)
+    slices = joint_slices(joints)
+    initial = record.states[0].joint_position
+    errors: dict[str, list[np.ndarray]] = {}
+    positions = np.array([s.joint_position for s in record.states])
+    for joint in joints:
+        q_slice = slices[joint.name][0]
+        if joint.kind == "ball":
+            relative = Rotation.from_quat(initial[q_slice]).inv() * Rotation.from_quat(
+                positions[:, q_slice]
+            )
+            error = relative.magnitude()
+        else:
+            error = np.abs(positions[:, q_slice][:, 0] - initial[q_slice][0])
+        errors.setdefault(_group(joint.name), []).append(error)
+    return {group: np.array(values) for group, values in errors.items()}
+
+
+def compute_metrics(record: RunRecord) -> dict[str, Any]:
+    """The run's report: fall, CM excursion, tracking RMS, COP margin, torques, speed."""
+    diagnostics = [c.diagnostics for c in record.commands]
+    com = np.array([d.position_com_in_world for d in diagnostics])
+    torques = np.array([c.joint_torque for c in record.commands])
+    limits = np.concatenate([j.torque_limit for j in record.welcome.joints])
+    cop_inside = [
+        strictly_inside(d.center_of_pressure[:2], d.support_polygon_xy.reshape(-1, 2))
+        for d, flags in zip(diagnostics, record.contact_flags, strict=True)
+        if any(flags)
+    ]
+    errors = _joint_errors_rad(record)
+    return {
+        "scenario": record.scenario.name,
+        "backend": record.scenario.backend,
+        "controller": record.scenario.controller,
+        "fell": record.fell,
+        "fall_time_s": record.fall_time_s,
+        "fall_reason": record.fall_reason,
+        "simulated_s": record.simulated_s,
+        "com_excursion_m": float(np.max(np.linalg.norm(com[:, :2] - com[0, :2], axis=1))),
+        "tracking_rms_rad": {
+            group: float(np.sqrt(np.mean(values**2))) for group, values in sorted(errors.items())
+        },
+        "cop_strictly_inside_fraction": float(np.mean(cop_inside)) if cop_inside else 0.0,
+        "peak_torque_Nm": float(np.abs(torques).max()),
+        "peak_torque_fraction_of_limit": float(np.max(np.abs(torques) / limits)),
+        "real_time_factor": record.real_time_factor,
+        "server_compute_p50_ms": float(
+            np.percentile([d.compute_time_s for d in diagnostics], 50) * 1e3
+        ),
+    }

@@ -1,0 +1,167 @@
+"""Run a scenario: a physics backend as a client of the controller server.
+
+Every control tick the runner reads the backend's state, sends it to the
+server (``state``), and applies the returned torques for the physics steps
+until the next tick (zero-order hold). In ``measured`` ground-force mode it
+also sends the backend's contact wrenches (the thesis' penalty forces). The
+run stops early once the robot has fallen.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from clients.client import ControllerClient
+from clients.layout import joint_slices, neutral_joint_position
+from clients.sim.backend import PhysicsBackend, SimState
+from clients.sim.scenario import Scenario
+from protocol.messages import Command, State, Welcome
+
+__all__ = ["FALL_TILT_RAD", "RunRecord", "make_backend", "run_scenario", "standing_state"]
+
+FALL_TILT_RAD = np.radians(60.0)
+"""Base tilt from upright beyond which the robot has fallen."""
+FALL_HEIGHT_FRACTION = 0.5
+"""Base height below this fraction of the standing height means fallen."""
+
+
+def make_backend(scenario: Scenario) -> PhysicsBackend:
+    """The scenario's physics backend at its physics rate and friction."""
+    timestep_s = 1.0 / scenario.physics_rate_hz
+    if scenario.backend == "mujoco":
+        from clients.sim.mujoco_backend import MujocoBackend
+
+        return MujocoBackend(
+            scenario.model,
+            friction_coefficient=scenario.friction_coefficient,
+            timestep_s=timestep_s,
+        )
+    from clients.sim.reference import ReferenceBackend
+
+    return ReferenceBackend(
+        scenario.model, friction_coefficient=scenario.friction_coefficient, timestep_s=timestep_s
+    )
+
+
+def standing_state(welcome: Welcome, joint_overrides: dict[str, list[float]]) -> SimState:
+    """Neutral pose (with overrides) at the standing height, at rest."""
+    joints = list(welcome.joints)
+    position = neutral_joint_position(joints)
+    slices = joint_slices(joints)
+    for name, value in joint_overrides.items():
+        if name not in slices:
+            raise ValueError(f"initial_joint_position: unknown joint {name!r}")
+        position[slices[name][0]] = value
+    return SimState(
+        joint_position=position,
+        joint_velocity=np.zeros(sum(j.nv for j in joints)),
+        position_base_in_world=np.array(welcome.standing_position_base_in_world),
+        orientation_base_in_world_xyzw=np.array([0.0, 0.0, 0.0, 1.0]),
+        linear_velocity_base_in_world=np.zeros(3),
+        angular_velocity_base_in_base=np.zeros(3),
+    )
+
+
+@dataclass
+class RunRecord:
+    """Time series of one run, one row per control tick."""
+
+    scenario: Scenario
+    welcome: Welcome
+    time_s: list[float] = field(default_factory=list)
+    states: list[SimState] = field(default_factory=list)
+    commands: list[Command] = field(default_factory=list)
+    contact_flags: list[list[bool]] = field(default_factory=list)
+    fell: bool = False
+    fall_time_s: float | None = None
+    fall_reason: str = ""
+    wall_time_s: float = 0.0
+
+    @property
+    def simulated_s(self) -> float:
+        """Simulated time covered."""
+        return self.time_s[-1] + 1.0 / self.scenario.control_rate_hz if self.time_s else 0.0
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated time over wall-clock time (≥ 1: faster than real time)."""
+        return self.simulated_s / self.wall_time_s if self.wall_time_s > 0 else float("nan")
+
+
+def _fall_reason(state: SimState, standing_height_m: float, non_foot_contact: bool) -> str:
+    if non_foot_contact:
+        return "non-foot contact with the ground"
+    if state.position_base_in_world[2] < FALL_HEIGHT_FRACTION * standing_height_m:
+        return "base below half its standing height"
+    up = Rotation.from_quat(state.orientation_base_in_world_xyzw).apply([0.0, 0.0, 1.0])
+    if np.arccos(np.clip(up[2], -1.0, 1.0)) > FALL_TILT_RAD:
+        return "base tilted past 60°"
+    return ""
+
+
+def run_scenario(
+    scenario: Scenario, endpoint: str, progress: Any = None, timeout_s: float = 10.0
+) -> RunRecord:
+    """Simulate ``scenario`` against the server at ``endpoint``.
+
+    Args:
+        scenario: What to run.
+        endpoint: ``poise serve`` endpoint.
+        progress: Optional callable ``progress(fraction)`` for a progress bar.
+        timeout_s: Per-request timeout.
+    """
+    backend = make_backend(scenario)
+    pushes = [push.to_push() for push in scenario.pushes]
+    measured = scenario.ground_force_mode == "measured"
+    with ControllerClient(endpoint, timeout_s=timeout_s) as client:
+        welcome = client.connect(
+            scenario.model,
+            controller=scenario.controller,
+            params={**scenario.params, "ground_force_mode": scenario.ground_force_mode},
+            client_name=f"poise sim {scenario.name}",
+        )
+        backend.reset(standing_state(welcome, scenario.initial_joint_position))
+        standing_height_m = welcome.standing_position_base_in_world[2]
+        record = RunRecord(scenario, welcome)
+        ticks = round(scenario.duration_s * scenario.control_rate_hz)
+        steps = scenario.physics_steps_per_control_tick
+        start = time.perf_counter()
+        for tick in range(ticks):
+            state = backend.state()
+            flags = backend.contact_flags()
+            command = client.step(
+                State(
+                    time_s=backend.time_s,
+                    joint_position=state.joint_position,
+                    joint_velocity=state.joint_velocity,
+                    position_base_in_world=state.position_base_in_world,
+                    orientation_base_in_world_xyzw=state.orientation_base_in_world_xyzw,
+                    linear_velocity_base_in_world=state.linear_velocity_base_in_world,
+                    angular_velocity_base_in_base=state.angular_velocity_base_in_base,
+                    contact_flags=flags,
+                    contact_wrench_in_world=(
+                        backend.contact_wrenches_in_world().reshape(-1) if measured else None
+                    ),
+                )
+            )
+            record.time_s.append(tick / scenario.control_rate_hz)
+            record.states.append(state)
+            record.commands.append(command)
+            record.contact_flags.append(flags)
+            non_foot_contact = False
+            for _ in range(steps):
+                report = backend.step(command.joint_torque, pushes)
+                non_foot_contact |= report.non_foot_contact
+            reason = _fall_reason(backend.state(), standing_height_m, non_foot_contact)
+            if reason:
+                record.fell, record.fall_time_s, record.fall_reason = True, backend.time_s, reason
+                break
+            if progress is not None and tick % 50 == 0:
+                progress(tick / ticks)
+        record.wall_time_s = time.perf_counter() - start
+    return record
