@@ -34,6 +34,16 @@ PACKAGES = [
     "clients",
     "clients.client",
     "clients.scripted",
+    "clients.sampling",
+    "clients.sim.backend",
+    "clients.sim.model_file",
+    "clients.sim.reference",
+    "clients.sim.mujoco_backend",
+    "clients.sim.scenario",
+    "clients.sim.runner",
+    "clients.sim.metrics",
+    "clients.sim.plots",
+    "clients.sim.app",
 ]
 
 

@@ -1,0 +1,760 @@
+"""Reference simulator: Featherstone forward dynamics with penalty ground contact.
+
+Macchietto 2008 ch. 4.3: the torques the controller returns, the penalty
+ground forces and any pushes go into Featherstone's articulated-body
+algorithm (Pinocchio's ``aba``), and the accelerations are integrated at a
+fixed 1 ms step by semi-implicit (symplectic) Euler::
+
+    a = aba(q, v, [0; τ], f_push) + M⁻¹ Jᵀ f_contact
+    v ← v + Δt a
+    q ← q ⊕ Δt v                      (``pinocchio.integrate``)
+
+Ground contact (thesis ch. 4.2: penalty forces) acts at the corners of each
+``*_sole`` box site. Per point below the ground, with depth ``d``:
+
+* normal: ``f_n = max(0, k d − c ż)`` (pushes, never pulls);
+* tangential: a spring–damper anchored where the point touched down,
+  ``f_t = −k_t (p − a) − c_t ṗ`` in the ground plane, capped at ``μ f_n``.
+  When the cap binds the point slides and its anchor is dragged along so
+  the spring holds exactly ``μ f_n`` (Coulomb sliding); below the cap it
+  sticks, with no creep. A regularized Coulomb law
+  (``−μ f_n v / max(|v|, v_slip)``) was rejected: it creeps at
+  ``v_slip · f_t / (μ f_n)`` under any sideways load, and a small
+  ``v_slip`` is a stiff damper.
+
+The springs are explicit; the dampers are taken at the end-of-step
+velocity (linearly implicit, see :meth:`ReferenceBackend._solve_contact`).
+Explicit dampers would be capped by the lightest link: the thesis foot's
+roll inertia about the ankle is 8·10⁻⁴ kg·m², which bounds ``c`` to about
+140 N·s/m per point at 1 ms, too little to damp anything (ζ ≈ 0.1 for the
+bounce, ≈ 0.01 for rocking on the soles). Implicit dampers are stable for
+any ``c``.
+
+Defaults, per contact point (four per foot): ``k = k_t = 5·10⁴ N/m`` sinks
+the 65 kg thesis humanoid 1.6 mm on average (2.2 mm under the heels);
+stiffer than that is not needed, softer lets the feet tilt under the
+centre of pressure (6 cm behind the sole centre in the neutral pose) and the
+base lean by ``m g e / (k Σx²)`` ≈ 6 mm. ``c = c_t = 1500 N·s/m`` makes the
+vertical bounce overdamped (ζ ≈ 1.2).
+
+"Non-foot contact" (a fall) is a corner of a box geom of any body other
+than the foot bodies below the ground; those corners get no forces.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial.transform import Rotation
+
+from clients.sim.backend import ContactPoint, Push, SimState, StepReport
+from clients.sim.model_file import resolve_model_path, sole_contact_points
+from protocol.errors import PoiseError
+
+__all__ = [
+    "DEFAULT_CONTACT_DAMPING_NS_PER_M",
+    "DEFAULT_CONTACT_STIFFNESS_N_PER_M",
+    "BodyNotFound",
+    "ReferenceBackend",
+    "SimulationDiverged",
+    "UnsupportedModel",
+    "box_corners_in_bodies",
+    "mjcf_gravity_in_world",
+]
+
+DEFAULT_CONTACT_STIFFNESS_N_PER_M = 5.0e4
+"""Normal (and tangential) penalty stiffness per contact point."""
+DEFAULT_CONTACT_DAMPING_NS_PER_M = 1500.0
+"""Normal (and tangential) penalty damping per contact point (stable at Δt = 1 ms)."""
+
+
+class BodyNotFound(PoiseError, KeyError):
+    """A push names a body the model does not have.
+
+    Attributes:
+        name: The unknown body.
+        available: Bodies of the model.
+    """
+
+    def __init__(self, name: str, available: list[str]):
+        self.name = name
+        self.available = available
+        super().__init__(f"no body {name!r} in the model; bodies: {', '.join(available)}")
+
+
+class SimulationDiverged(PoiseError, FloatingPointError):
+    """A step produced a non-finite velocity; ``q``, ``v`` and time stay as before the step.
+
+    Attributes:
+        time_s: Simulation time at the start of the failed step.
+    """
+
+    def __init__(self, time_s: float, largest_torque: float):
+        self.time_s = time_s
+        super().__init__(
+            f"the state became non-finite in the step at {time_s=:.4f} "
+            f"(largest |joint_torque| {largest_torque:.3g}); the lightest links cannot "
+            "take such torques at this time step: reduce the torques or timestep_s"
+        )
+
+
+class UnsupportedModel(PoiseError, ValueError):
+    """The MJCF uses something the reference simulator cannot represent."""
+
+
+def _floats(text: str | None, count: int, default: tuple[float, ...]) -> np.ndarray:
+    if text is None:
+        return np.array(default, dtype=float)
+    values = np.array([float(s) for s in text.split()], dtype=float)
+    if values.size < count:
+        raise UnsupportedModel(f"expected {count} numbers, got {text!r}")
+    return values[:count]
+
+
+def _mjcf_rotation(element: ET.Element, degrees: bool, euler_sequence: str) -> np.ndarray:
+    """Rotation matrix of an MJCF element's orientation (quat, euler, axisangle, xyaxes, zaxis)."""
+    if (quat := element.get("quat")) is not None:
+        w, x, y, z = _floats(quat, 4, ())
+        return Rotation.from_quat([x, y, z, w]).as_matrix()
+    if (euler := element.get("euler")) is not None:
+        # MJCF: lower case = intrinsic (rotating axes); SciPy: upper case = intrinsic.
+        return Rotation.from_euler(
+            euler_sequence.swapcase(), _floats(euler, 3, ()), degrees=degrees
+        ).as_matrix()
+    if (axisangle := element.get("axisangle")) is not None:
+        values = _floats(axisangle, 4, ())
+        angle = np.radians(values[3]) if degrees else values[3]
+        return Rotation.from_rotvec(angle * values[:3] / np.linalg.norm(values[:3])).as_matrix()
+    if (xyaxes := element.get("xyaxes")) is not None:
+        values = _floats(xyaxes, 6, ())
+        x_axis = values[:3] / np.linalg.norm(values[:3])
+        y_axis = values[3:] - (values[3:] @ x_axis) * x_axis
+        y_axis /= np.linalg.norm(y_axis)
+        return np.column_stack([x_axis, y_axis, np.cross(x_axis, y_axis)])
+    if (zaxis := element.get("zaxis")) is not None:
+        z_axis = _floats(zaxis, 3, ())
+        z_axis /= np.linalg.norm(z_axis)
+        axis = np.cross([0.0, 0.0, 1.0], z_axis)
+        angle = np.arctan2(np.linalg.norm(axis), z_axis[2])
+        if np.linalg.norm(axis) < 1e-12:
+            return np.eye(3) if z_axis[2] > 0 else np.diag([1.0, -1.0, -1.0])
+        return Rotation.from_rotvec(angle * axis / np.linalg.norm(axis)).as_matrix()
+    return np.eye(3)
+
+
+def box_corners_in_bodies(path: Path) -> dict[str, np.ndarray]:
+    """The eight corners of every box geom, per MJCF body, in that body's frame.
+
+    Geoms of other types (and of the world body) are skipped: the built-in
+    models are boxes only. ``<default>`` classes are not expanded.
+
+    Args:
+        path: MJCF file.
+
+    Returns:
+        Body name → ``(8 · boxes, 3)`` corner positions (m).
+    """
+    root = ET.parse(path).getroot()
+    compiler = root.find("compiler")
+    degrees = compiler is None or compiler.get("angle", "degree") != "radian"
+    euler_sequence = "xyz" if compiler is None else compiler.get("eulerseq", "xyz")
+    signs = np.array([[sx, sy, sz] for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)], float)
+    corners: dict[str, np.ndarray] = {}
+    for body in root.iter("body"):
+        name = body.get("name", "")
+        for geom in body.findall("geom"):
+            if geom.get("type") != "box":
+                continue
+            if geom.get("fromto") is not None:
+                raise UnsupportedModel(f"box geom {geom.get('name')!r} uses fromto")
+            half_extents = _floats(geom.get("size"), 3, ())
+            rotation = _mjcf_rotation(geom, degrees, euler_sequence)
+            position = _floats(geom.get("pos"), 3, (0.0, 0.0, 0.0))
+            box = (signs * half_extents) @ rotation.T + position
+            corners[name] = np.vstack([corners[name], box]) if name in corners else box
+    return corners
+
+
+def mjcf_gravity_in_world(path: Path) -> np.ndarray:
+    """Gravity from the MJCF ``<option gravity>`` (MuJoCo's default ``0 0 −9.81``)."""
+    option = ET.parse(path).getroot().find("option")
+    text = None if option is None else option.get("gravity")
+    return _floats(text, 3, (0.0, 0.0, -9.81))
+
+
+def _skew(vector: np.ndarray) -> np.ndarray:
+    """``[v]×``, the matrix with ``[v]× u = v × u``."""
+    x, y, z = vector
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a × b`` for two 3-vectors (numpy's ``cross`` costs tens of µs per call)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
+
+
+@dataclass(frozen=True)
+class _ContactBlock:
+    """The points of one contact: all fixed to one joint, reported about one site frame.
+
+    Attributes:
+        joint: Pinocchio joint the points are fixed to.
+        points: Their rows in the per-point arrays.
+        points_in_joint: ``(k, 3)`` point positions in the joint frame.
+        skew_stack: ``(3k, 3)`` stacked ``[p_i]×``, so that the point
+            velocities in the joint frame are ``v − skew_stack ω``.
+        site_position_in_joint: Origin of the contact's site frame.
+        homogeneous_points: ``(k + 1, 4)`` the points, then the site origin,
+            in homogeneous coordinates.
+        velocity_map: ``(3k, 6)`` ``[I; …; I | −skew_stack]``: point
+            velocities in the joint frame from the joint's spatial velocity.
+    """
+
+    joint: int
+    points: slice
+    points_in_joint: np.ndarray
+    skew_stack: np.ndarray
+    site_position_in_joint: np.ndarray
+    homogeneous_points: np.ndarray
+    velocity_map: np.ndarray
+
+    @classmethod
+    def build(
+        cls, joint: int, points: slice, points_in_joint: np.ndarray, site: np.ndarray
+    ) -> _ContactBlock:
+        """A block with its skew matrices precomputed."""
+        skew_stack = np.vstack([_skew(p) for p in points_in_joint]).reshape(-1, 3)
+        homogeneous = np.hstack(
+            [np.vstack([points_in_joint, site]), np.ones((len(points_in_joint) + 1, 1))]
+        )
+        velocity_map = np.hstack([np.tile(np.eye(3), (len(points_in_joint), 1)), -skew_stack])
+        return cls(joint, points, points_in_joint, skew_stack, site, homogeneous, velocity_map)
+
+
+class ReferenceBackend:
+    """Pinocchio ABA + penalty contact + semi-implicit Euler (Macchietto 2008, ch. 4.3).
+
+    Implements :class:`clients.sim.backend.PhysicsBackend`. Starts standing in
+    the neutral pose at ``qpos0``, at rest.
+
+    Args:
+        model: Built-in model name or MJCF path.
+        friction_coefficient: Coulomb μ between soles and ground.
+        timestep_s: Integration step (s).
+        ground_height_m: Height of the flat ground (m).
+        contact_stiffness_N_per_m: Normal penalty stiffness ``k`` per point.
+        contact_damping_Ns_per_m: Normal penalty damping ``c`` per point.
+        tangential_stiffness_N_per_m: Stick spring ``k_t`` per point (default ``k``).
+        tangential_damping_Ns_per_m: Stick damper ``c_t`` per point (default ``c``).
+        gravity_in_world_m_per_s2: Overrides the MJCF ``<option gravity>``.
+
+    Raises:
+        ValueError: A parameter is out of range (its value is in the message).
+        UnsupportedModel: The MJCF has no free-floating root or uses
+            unsupported geometry.
+    """
+
+    name = "reference"
+
+    def __init__(
+        self,
+        model: str,
+        *,
+        friction_coefficient: float = 0.8,
+        timestep_s: float = 0.001,
+        ground_height_m: float = 0.0,
+        contact_stiffness_N_per_m: float = DEFAULT_CONTACT_STIFFNESS_N_PER_M,
+        contact_damping_Ns_per_m: float = DEFAULT_CONTACT_DAMPING_NS_PER_M,
+        tangential_stiffness_N_per_m: float | None = None,
+        tangential_damping_Ns_per_m: float | None = None,
+        gravity_in_world_m_per_s2: tuple[float, float, float] | None = None,
+    ):
+        if tangential_stiffness_N_per_m is None:
+            tangential_stiffness_N_per_m = contact_stiffness_N_per_m
+        if tangential_damping_Ns_per_m is None:
+            tangential_damping_Ns_per_m = contact_damping_Ns_per_m
+        for label, value, positive in (
+            ("friction_coefficient", friction_coefficient, False),
+            ("timestep_s", timestep_s, True),
+            ("contact_stiffness_N_per_m", contact_stiffness_N_per_m, True),
+            ("contact_damping_Ns_per_m", contact_damping_Ns_per_m, False),
+            ("tangential_stiffness_N_per_m", tangential_stiffness_N_per_m, True),
+            ("tangential_damping_Ns_per_m", tangential_damping_Ns_per_m, False),
+        ):
+            if not np.isfinite(value) or value < 0 or (positive and value == 0):
+                raise ValueError(
+                    f"{label} must be finite and {'> 0' if positive else '≥ 0'}: {value!r}"
+                )
+        if not np.isfinite(ground_height_m):
+            raise ValueError(f"ground_height_m must be finite: {ground_height_m!r}")
+        self.path = resolve_model_path(model)
+        self.friction_coefficient = float(friction_coefficient)
+        self.timestep_s = float(timestep_s)
+        self.ground_height_m = float(ground_height_m)
+        self.contact_stiffness_N_per_m = float(contact_stiffness_N_per_m)
+        self.contact_damping_Ns_per_m = float(contact_damping_Ns_per_m)
+        self.tangential_stiffness_N_per_m = float(tangential_stiffness_N_per_m)
+        self.tangential_damping_Ns_per_m = float(tangential_damping_Ns_per_m)
+        self.time_s = 0.0
+        self._steps = 0  # time_s = steps · Δt, without summing rounding errors
+
+        self._model = pin.buildModelFromMJCF(str(self.path))
+        if self._model.njoints < 2 or self._model.joints[1].shortname() != "JointModelFreeFlyer":
+            raise UnsupportedModel(f"{self.path}: the root body needs a freejoint")
+        gravity = (
+            mjcf_gravity_in_world(self.path)
+            if gravity_in_world_m_per_s2 is None
+            else np.asarray(gravity_in_world_m_per_s2, dtype=float).reshape(3)
+        )
+        self._model.gravity = pin.Motion(gravity, np.zeros(3))
+        self._data = self._model.createData()
+        self._qpos0 = self._model.referenceConfigurations["qpos0"].copy()
+        self._q = self._qpos0.copy()
+        self._v = np.zeros(self._model.nv)
+        self._tau = np.zeros(self._model.nv)
+        self._fext = pin.StdVec_Force()
+        for _ in range(self._model.njoints):
+            self._fext.append(pin.Force.Zero())
+        self._pushed_joints: set[int] = set()
+
+        self._bodies = {
+            frame.name: (frame.parentJoint, frame.placement.copy())
+            for frame in self._model.frames
+            if frame.type == pin.FrameType.BODY
+        }
+        self._setup_contacts(sole_contact_points(self.path))
+        self._setup_non_foot_geoms()
+        self._update_kinematics()
+        self._report_explicit_forces()
+        self._contact_flags = (self._contact_sum @ self._touching > 0.0).tolist()
+
+    # ----------------------------------------------------------------- setup
+
+    def _setup_contacts(self, points: list[ContactPoint]) -> None:
+        self.contact_points = points
+        self.contact_names: list[str] = list(dict.fromkeys(p.contact for p in points))
+        site_bodies = {
+            site.get("name"): body.get("name")
+            for body in ET.parse(self.path).getroot().iter("body")
+            for site in body.findall("site")
+        }
+        self._foot_bodies = set()
+        self._blocks: list[_ContactBlock] = []
+        start = 0
+        for contact in self.contact_names:
+            members = [p for p in points if p.contact == contact]
+            frames = {p.frame for p in members}
+            if len(frames) != 1:
+                raise UnsupportedModel(f"contact {contact!r} spans frames {sorted(frames)}")
+            site = members[0].frame
+            if not self._model.existFrame(site):
+                raise UnsupportedModel(f"{self.path}: site {site!r} is not a model frame")
+            self._foot_bodies.add(site_bodies.get(site, ""))
+            frame = self._model.frames[self._model.getFrameId(site)]
+            points_in_joint = np.array(
+                [frame.placement.act(np.array(p.point_in_frame, float)) for p in members]
+            )
+            self._blocks.append(
+                _ContactBlock.build(
+                    frame.parentJoint,
+                    slice(start, start + len(members)),
+                    points_in_joint,
+                    frame.placement.translation.copy(),
+                )
+            )
+            start += len(members)
+        self._point_position = np.zeros((start, 3))
+        self._point_velocity = np.zeros((start, 3))
+        self._point_force = np.zeros((start, 3))
+        self._touching = np.zeros(start, dtype=bool)
+        self._anchor = np.zeros((start, 2))
+        self._anchored = np.zeros(start, dtype=bool)
+        self._damping_per_row = np.tile(
+            [
+                self.tangential_damping_Ns_per_m,
+                self.tangential_damping_Ns_per_m,
+                self.contact_damping_Ns_per_m,
+            ],
+            start,
+        )
+        self._all_rows = np.arange(3 * start)
+        self._point_contact = np.zeros(start, dtype=int)
+        self._contact_sum = np.zeros((len(self._blocks), start))
+        for index, block in enumerate(self._blocks):
+            self._point_contact[block.points] = index
+            self._contact_sum[index, block.points] = 1.0
+        self._point_wrench = np.zeros((start, 6))
+        self._site_origin = np.zeros((len(self._blocks), 3))
+        self._contact_wrench = np.zeros((len(self._blocks), 6))
+        self._contact_flags = [False] * len(self._blocks)
+
+    def _setup_non_foot_geoms(self) -> None:
+        by_joint: dict[int, list[np.ndarray]] = {}
+        for body, corners in box_corners_in_bodies(self.path).items():
+            if body in self._foot_bodies or body not in self._bodies:
+                continue
+            joint, placement = self._bodies[body]
+            by_joint.setdefault(joint, []).append(
+                corners @ placement.rotation.T + placement.translation
+            )
+        # Per joint: its corners and their farthest distance from the joint
+        # origin, to skip bodies well above the ground without rotating corners.
+        self._non_foot_geoms = []
+        for joint, blocks in sorted(by_joint.items()):
+            corners = np.vstack(blocks)
+            reach_m = float(np.max(np.linalg.norm(corners, axis=1)))
+            chain_m, parent = 0.0, joint
+            while parent > 1:
+                chain_m += float(np.linalg.norm(self._model.jointPlacements[parent].translation))
+                parent = self._model.parents[parent]
+            self._non_foot_geoms.append((joint, corners, reach_m, chain_m))
+        self._non_foot_contact = False
+
+    # --------------------------------------------------------------- physics
+
+    def _update_kinematics(self) -> None:
+        """Contact points, touching set, anchors, flags and falls at the current state."""
+        data = self._data
+        pin.forwardKinematics(self._model, data, self._q, self._v)
+        position, velocity = self._point_position, self._point_velocity
+        for index, block in enumerate(self._blocks):
+            transform = data.oMi[block.joint].homogeneous
+            rotation = transform[:3, :3]
+            placed = block.homogeneous_points @ transform[:3].T
+            position[block.points] = placed[:-1]
+            self._site_origin[index] = placed[-1]
+            velocity_in_joint = block.velocity_map @ data.v[block.joint].vector
+            velocity[block.points] = velocity_in_joint.reshape(-1, 3) @ rotation.T
+        touching = position[:, 2] < self.ground_height_m
+        # A spring anchor is set where a point touches down and forgotten at lift-off.
+        landing = touching & ~self._anchored
+        if landing.any():
+            self._anchor[landing] = position[landing, :2]
+        self._anchored = touching
+        self._touching = touching
+
+        self._non_foot_contact = False
+        base_height = self._q[2]
+        for joint, corners, reach_m, chain_m in self._non_foot_geoms:
+            # The joint is at most ``chain_m`` from the base origin: skip it unread
+            # when even that leaves its geoms above the ground.
+            if base_height - chain_m - reach_m > self.ground_height_m:
+                continue
+            transform = data.oMi[joint]
+            height = transform.translation[2]
+            if height - reach_m > self.ground_height_m:
+                continue
+            if (corners @ transform.rotation[2]).min() + height < self.ground_height_m:
+                self._non_foot_contact = True
+                break
+
+    def _spring_forces(self, points: np.ndarray) -> np.ndarray:
+        """``(len(points), 3)`` spring part of the penalty force at these points."""
+        spring = np.empty((points.size, 3))
+        spring[:, :2] = -self.tangential_stiffness_N_per_m * (
+            self._point_position[points, :2] - self._anchor[points]
+        )
+        spring[:, 2] = self.contact_stiffness_N_per_m * (
+            self.ground_height_m - self._point_position[points, 2]
+        )
+        return spring
+
+    def _limit_friction(
+        self, points: np.ndarray, forces: np.ndarray, drag_anchors: bool = True
+    ) -> None:
+        """Clamp ``forces`` (in place) to the Coulomb cone; sliding points drag their anchors."""
+        tangential = forces[:, :2]
+        norm = np.hypot(tangential[:, 0], tangential[:, 1])
+        limit = self.friction_coefficient * forces[:, 2]
+        sliding = norm > limit
+        if sliding.any():
+            tangential[sliding] *= (limit[sliding] / norm[sliding])[:, None]
+            if not drag_anchors:
+                return
+            self._anchor[points[sliding]] = (
+                self._point_position[points[sliding], :2]
+                + tangential[sliding] / self.tangential_stiffness_N_per_m
+            )
+
+    def _contact_jacobian(self) -> np.ndarray:
+        """``(3 · points, nv)`` world-axes velocity Jacobian of every contact point."""
+        model, data = self._model, self._data
+        nv = model.nv
+        pin.computeJointJacobians(model, data, self._q)
+        rows = []
+        for block in self._blocks:
+            jacobian = pin.getJointJacobian(model, data, block.joint, pin.ReferenceFrame.LOCAL)
+            count = block.points_in_joint.shape[0]
+            in_joint = jacobian[None, :3] - (block.skew_stack @ jacobian[3:]).reshape(count, 3, nv)
+            rows.append((data.oMi[block.joint].rotation @ in_joint).reshape(3 * count, nv))
+        return np.vstack(rows)
+
+    def _solve_contact(self, acceleration: np.ndarray) -> None:
+        """Penalty forces with the dampers taken at the end-of-step velocity.
+
+        With ``J`` the contact Jacobian, ``G = J M⁻¹ Jᵀ``, ``C`` the dampers and
+        ``f_s`` the springs, the force that acts during the step solves
+        ``f = f_s − C (J (v + Δt a_free) + Δt G f)``, i.e.
+        ``(I + Δt C G) f = f_s − C J (v + Δt a_free)``. Points that would
+        pull are released and the system solved again; then each force is
+        clamped to its friction cone. ``acceleration`` (``a_free`` on entry)
+        gets ``M⁻¹ Jᵀ f`` added in place.
+        """
+        model, data, step_s = self._model, self._data, self.timestep_s
+        points = np.flatnonzero(self._touching)
+        jacobian = self._contact_jacobian()
+        if points.size == self._touching.size:
+            rows = self._all_rows
+        else:
+            rows = (3 * points[:, None] + np.arange(3)).reshape(-1)
+            jacobian = jacobian[rows]
+        # Pinocchio ≥ 4 fills the whole (symmetric) M⁻¹.
+        inverse_mass = pin.computeMinverse(model, data, self._q)
+        response = inverse_mass @ jacobian.T
+        damping = self._damping_per_row[rows]
+        system = (step_s * damping)[:, None] * (jacobian @ response)
+        system.flat[:: rows.size + 1] += 1.0
+        rhs = self._spring_forces(points).reshape(-1) - damping * (
+            jacobian @ (self._v + step_s * acceleration)
+        )
+        forces = np.linalg.solve(system, rhs).reshape(-1, 3)
+        keep = forces[:, 2] >= 0.0
+        # Release the points that would pull and solve again, until none does.
+        while not keep.all() and keep.any():
+            kept_rows = np.repeat(keep, 3)
+            forces = np.linalg.solve(system[np.ix_(kept_rows, kept_rows)], rhs[kept_rows])
+            forces = forces.reshape(-1, 3)
+            pulling = forces[:, 2] < 0.0
+            if not pulling.any():
+                break
+            keep[np.flatnonzero(keep)[pulling]] = False
+        if not keep.any():
+            return
+        active = points[keep]
+        self._limit_friction(active, forces)
+        self._point_force[active] = forces
+        if not keep.all():
+            response = response[:, np.repeat(keep, 3)]
+        acceleration += response @ forces.reshape(-1)
+
+    def _report_explicit_forces(self) -> None:
+        """Forces with explicit dampers at the current state (what is reported after reset)."""
+        self._point_force[:] = 0.0
+        points = np.flatnonzero(self._touching)
+        if points.size:
+            forces = (
+                self._spring_forces(points)
+                - self._damping_per_row[: 3 * points.size].reshape(-1, 3)
+                * self._point_velocity[points]
+            )
+            forces[:, 2] = np.maximum(forces[:, 2], 0.0)
+            self._limit_friction(points, forces, drag_anchors=False)
+            self._point_force[points] = forces
+        self._update_wrenches()
+
+    def _update_wrenches(self) -> None:
+        """Per contact: summed point forces and their moment about the site origin."""
+        arms = self._point_position - self._site_origin[self._point_contact]
+        self._point_wrench[:, :3] = self._point_force
+        force = self._point_force
+        torque = self._point_wrench[:, 3:]
+        torque[:, 0] = arms[:, 1] * force[:, 2] - arms[:, 2] * force[:, 1]
+        torque[:, 1] = arms[:, 2] * force[:, 0] - arms[:, 0] * force[:, 2]
+        torque[:, 2] = arms[:, 0] * force[:, 1] - arms[:, 1] * force[:, 0]
+        np.matmul(self._contact_sum, self._point_wrench, out=self._contact_wrench)
+
+    def step(self, joint_torque: np.ndarray, pushes: list[Push]) -> StepReport:
+        """Advance one time step with these joint torques (wire order) and active pushes.
+
+        Args:
+            joint_torque: ``(nv − 6,)`` joint torques (N·m; N for prismatic joints).
+            pushes: All pushes; each acts with its force scaled by the fraction
+                of ``[time_s, time_s + timestep_s)`` it covers.
+
+        Returns:
+            Contact flags of the step (as :meth:`contact_flags`) and whether a
+            non-foot box corner is below the ground at the new state.
+
+        Raises:
+            ValueError: ``joint_torque`` has the wrong shape or is not finite.
+            BodyNotFound: A push names an unknown body.
+            SimulationDiverged: The step would make the state non-finite.
+        """
+        model, data = self._model, self._data
+        torque = np.asarray(joint_torque, dtype=float)
+        if torque.shape != (model.nv - 6,):
+            raise ValueError(f"joint_torque must have {model.nv - 6} entries: {torque.shape=}")
+        if not np.isfinite(torque).all():
+            raise ValueError(f"joint_torque must be finite: {torque}")
+        self._tau[6:] = torque
+
+        fext = self._fext
+        for joint in self._pushed_joints:
+            fext[joint] = pin.Force.Zero()
+        self._pushed_joints = set()
+        step_end_s = (self._steps + 1) * self.timestep_s
+        for push in pushes:
+            # Scaled by the fraction of the step it covers: the impulse is
+            # F · duration_s however the push aligns with the steps.
+            overlap_s = min(step_end_s, push.start_s + push.duration_s) - max(
+                self.time_s, push.start_s
+            )
+            if overlap_s <= 0.0:
+                continue
+            if push.body not in self._bodies:
+                raise BodyNotFound(push.body, sorted(self._bodies))
+            joint, placement = self._bodies[push.body]
+            point_in_joint = placement.act(np.asarray(push.point_in_body_m, dtype=float))
+            force_in_world = (overlap_s / self.timestep_s) * np.asarray(
+                push.force_in_world_N, dtype=float
+            )
+            force_in_joint = data.oMi[joint].rotation.T @ force_in_world
+            fext[joint] = fext[joint] + pin.Force(
+                force_in_joint, _cross(point_in_joint, force_in_joint)
+            )
+            self._pushed_joints.add(joint)
+
+        acceleration = pin.aba(model, data, self._q, self._v, self._tau, fext).copy()
+        self._point_force[:] = 0.0
+        if self._touching.any():
+            self._solve_contact(acceleration)
+        self._update_wrenches()
+        velocity = self._v + self.timestep_s * acceleration
+        if not np.isfinite(velocity).all():
+            raise SimulationDiverged(self.time_s, float(np.abs(torque).max(initial=0.0)))
+        self._v = velocity
+        self._q = pin.integrate(model, self._q, self.timestep_s * velocity)
+        self._steps += 1
+        self.time_s = self._steps * self.timestep_s
+        self._contact_flags = (self._contact_sum @ self._touching > 0.0).tolist()
+        self._update_kinematics()
+        return StepReport(list(self._contact_flags), self._non_foot_contact)
+
+    # ------------------------------------------------------- wire conventions
+
+    def reset(self, state: SimState) -> None:
+        """Put the robot in ``state`` at time 0 (velocities included; anchors cleared).
+
+        Raises:
+            ValueError: An array has the wrong size or is not finite.
+        """
+        model = self._model
+        sizes = {
+            "joint_position": model.nq - 7,
+            "joint_velocity": model.nv - 6,
+            "position_base_in_world": 3,
+            "orientation_base_in_world_xyzw": 4,
+            "linear_velocity_base_in_world": 3,
+            "angular_velocity_base_in_base": 3,
+        }
+        arrays = {}
+        for key, size in sizes.items():
+            value = getattr(state, key)
+            array = np.asarray(value, dtype=float).reshape(-1)
+            if array.size != size or not np.isfinite(array).all():
+                raise ValueError(f"{key} must be {size} finite numbers: {value!r}")
+            arrays[key] = array
+        q = np.concatenate(
+            [
+                arrays["position_base_in_world"],
+                arrays["orientation_base_in_world_xyzw"],
+                arrays["joint_position"],
+            ]
+        )
+        self._q = pin.normalize(model, q)
+        rotation = pin.Quaternion(self._q[3:7]).toRotationMatrix()
+        self._v = np.concatenate(
+            [
+                rotation.T @ arrays["linear_velocity_base_in_world"],
+                arrays["angular_velocity_base_in_base"],
+                arrays["joint_velocity"],
+            ]
+        )
+        self.time_s = 0.0
+        self._steps = 0
+        self._anchored[:] = False
+        self._update_kinematics()
+        self._report_explicit_forces()
+        self._contact_flags = (self._contact_sum @ self._touching > 0.0).tolist()
+
+    def state(self) -> SimState:
+        """Current state in wire conventions."""
+        rotation = pin.Quaternion(self._q[3:7]).toRotationMatrix()
+        return SimState(
+            joint_position=self._q[7:].copy(),
+            joint_velocity=self._v[6:].copy(),
+            position_base_in_world=self._q[:3].copy(),
+            orientation_base_in_world_xyzw=self._q[3:7].copy(),
+            linear_velocity_base_in_world=rotation @ self._v[:3],
+            angular_velocity_base_in_base=self._v[3:6].copy(),
+        )
+
+    def standing_state(self) -> SimState:
+        """The neutral pose at ``qpos0`` (soles on the ground for the built-ins), at rest."""
+        return SimState(
+            joint_position=self._qpos0[7:].copy(),
+            joint_velocity=np.zeros(self._model.nv - 6),
+            position_base_in_world=self._qpos0[:3].copy(),
+            orientation_base_in_world_xyzw=self._qpos0[3:7].copy(),
+            linear_velocity_base_in_world=np.zeros(3),
+            angular_velocity_base_in_base=np.zeros(3),
+        )
+
+    # --------------------------------------------------------------- contact
+
+    def contact_flags(self) -> list[bool]:
+        """Per contact (welcome order): was any of its points below the ground in the last step.
+
+        That is, at the start of the last step, the state whose penalty forces
+        acted during it; after :meth:`reset`, at the reset state.
+        """
+        return list(self._contact_flags)
+
+    def contact_wrenches_in_world(self) -> np.ndarray:
+        """``(contacts, 6)`` ground force and torque about each sole-site origin (N, N·m).
+
+        World axes. The penalty forces that acted during the last step, about
+        the site origins at the start of that step; after :meth:`reset`, the
+        springs and dampers evaluated at the reset state.
+        """
+        return self._contact_wrench.copy()
+
+    def contact_point_forces_in_world(self) -> np.ndarray:
+        """``(points, 3)`` penalty force at each point during the last step (N)."""
+        return self._point_force.copy()
+
+    def contact_point_positions_in_world(self) -> np.ndarray:
+        """``(points, 3)`` position of each contact point now, contacts in order (m)."""
+        return self._point_position.copy()
+
+    def non_foot_contact(self) -> bool:
+        """Whether a box corner of a body other than the feet is below the ground now."""
+        return self._non_foot_contact
+
+    # ------------------------------------------------------------- the model
+
+    @property
+    def pinocchio_model(self) -> pin.Model:
+        """The Pinocchio model being integrated (gravity set; do not modify)."""
+        return self._model
+
+    @property
+    def total_mass_kg(self) -> float:
+        """Total mass of the robot."""
+        return float(pin.computeTotalMass(self._model))
+
+    @property
+    def configuration(self) -> np.ndarray:
+        """Pinocchio ``q`` (copy): base position, base quaternion xyzw, joints."""
+        return self._q.copy()
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """Pinocchio ``v`` (copy): base twist in the base frame, then joint velocities."""
+        return self._v.copy()

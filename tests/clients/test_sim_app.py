@@ -1,0 +1,55 @@
+"""Scenarios, the runner over ZeroMQ, metrics and plots (MuJoCo backend)."""
+
+import json
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from clients.sim.app import run_scenarios
+from clients.sim.metrics import strictly_inside
+from clients.sim.scenario import SCENARIO_DIR, Scenario, load_scenario
+
+pytestmark = pytest.mark.e2e
+
+
+@pytest.mark.parametrize("path", sorted(SCENARIO_DIR.glob("*.toml")), ids=lambda p: p.stem)
+def test_builtin_scenarios_validate(path):
+    scenario = load_scenario(path.stem)
+    assert scenario.name == path.stem
+    assert scenario.physics_steps_per_control_tick >= 1
+
+
+def test_scenario_errors_are_explicit():
+    with pytest.raises(FileNotFoundError, match="push_sequence"):
+        load_scenario("no_such_scenario")
+    with pytest.raises(ValidationError, match="whole multiple"):
+        Scenario(name="x", control_rate_hz=300.0, physics_rate_hz=1000.0)
+    with pytest.raises(ValidationError):
+        Scenario(name="x", friction_coefficient=-1.0)
+
+
+def test_strictly_inside():
+    square = np.array([[0.1, 0.1], [-0.1, 0.1], [-0.1, -0.1], [0.1, -0.1]])  # counter-clockwise
+    assert strictly_inside(np.array([0.0, 0.0]), square)
+    assert not strictly_inside(np.array([0.0995, 0.0]), square)  # within the 1 mm margin
+    assert not strictly_inside(np.array([0.2, 0.0]), square)
+    assert not strictly_inside(np.array([np.nan, 0.0]), square)
+
+
+def test_quiet_standing_in_mujoco_stays_up_with_report_and_plot(server, tmp_path):
+    reports = run_scenarios(
+        ["stand"],
+        tmp_path,
+        endpoint=server.endpoint,
+        overrides={"backend": "mujoco", "duration_s": 0.5},
+        progress=False,
+    )
+    (report,) = reports
+    assert not report["fell"]
+    assert report["com_excursion_m"] < 0.01
+    assert report["cop_strictly_inside_fraction"] > 0.9
+    assert report["simulated_s"] == pytest.approx(0.5)
+    assert json.loads((tmp_path / "report.json").read_text())[0]["scenario"] == "stand"
+    png = (tmp_path / "stand.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 10_000
