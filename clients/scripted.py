@@ -19,34 +19,10 @@ from scipy.spatial.transform import Rotation
 
 from clients.client import ControllerClient
 from clients.layout import joint_slices, neutral_joint_position
-from protocol.messages import Command, JointInfo, State
+from clients.state import RobotState
+from protocol.messages import Command, JointInfo
 
-__all__ = ["KinematicState", "ScriptedRun", "integrate", "perturbed_pose", "run_scripted"]
-
-
-@dataclass
-class KinematicState:
-    """Robot state in wire conventions (see ``docs/protocol.md``)."""
-
-    joint_position: np.ndarray
-    joint_velocity: np.ndarray
-    position_base_in_world: np.ndarray
-    orientation_base_in_world_xyzw: np.ndarray
-    linear_velocity_base_in_world: np.ndarray
-    angular_velocity_base_in_base: np.ndarray
-
-    def to_message(self, time_s: float, contact_flags: list[bool]) -> State:
-        """The ``state`` message for this instant."""
-        return State(
-            time_s=time_s,
-            joint_position=self.joint_position,
-            joint_velocity=self.joint_velocity,
-            position_base_in_world=self.position_base_in_world,
-            orientation_base_in_world_xyzw=self.orientation_base_in_world_xyzw,
-            linear_velocity_base_in_world=self.linear_velocity_base_in_world,
-            angular_velocity_base_in_base=self.angular_velocity_base_in_base,
-            contact_flags=contact_flags,
-        )
+__all__ = ["ScriptedRun", "integrate", "perturbed_pose", "run_scripted"]
 
 
 def _rotate_local(quaternion_xyzw: np.ndarray, rotation_vector: np.ndarray) -> np.ndarray:
@@ -54,8 +30,8 @@ def _rotate_local(quaternion_xyzw: np.ndarray, rotation_vector: np.ndarray) -> n
 
 
 def integrate(
-    state: KinematicState, command: Command, joints: list[JointInfo], dt_s: float
-) -> KinematicState:
+    state: RobotState, command: Command, joints: list[JointInfo], dt_s: float
+) -> RobotState:
     """Semi-implicit Euler step with the command's accelerations."""
     joint_velocity = state.joint_velocity + dt_s * command.joint_acceleration
     joint_position = state.joint_position.copy()
@@ -71,7 +47,7 @@ def integrate(
     angular_velocity = (
         state.angular_velocity_base_in_base + dt_s * command.base_angular_acceleration_in_base
     )
-    return KinematicState(
+    return RobotState(
         joint_position=joint_position,
         joint_velocity=joint_velocity,
         position_base_in_world=state.position_base_in_world + dt_s * linear_velocity,
@@ -134,7 +110,7 @@ def run_scripted(
     joints = list(welcome.joints)
     neutral = neutral_joint_position(joints)
     nv = sum(j.nv for j in joints)
-    state = KinematicState(
+    state = RobotState(
         joint_position=perturbed_pose(joints, angle_rad),
         joint_velocity=np.zeros(nv),
         position_base_in_world=np.array(welcome.standing_position_base_in_world),

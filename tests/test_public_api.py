@@ -35,6 +35,7 @@ PACKAGES = [
     "clients.client",
     "clients.scripted",
     "clients.sampling",
+    "clients.state",
     "clients.sim.backend",
     "clients.sim.model_file",
     "clients.sim.reference",

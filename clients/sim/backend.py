@@ -17,19 +17,9 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["ContactPoint", "PhysicsBackend", "Push", "SimState"]
+from clients.state import RobotState
 
-
-@dataclass
-class SimState:
-    """Robot state in wire conventions (the fields of a ``state`` message)."""
-
-    joint_position: np.ndarray
-    joint_velocity: np.ndarray
-    position_base_in_world: np.ndarray
-    orientation_base_in_world_xyzw: np.ndarray
-    linear_velocity_base_in_world: np.ndarray
-    angular_velocity_base_in_base: np.ndarray
+__all__ = ["ContactPoint", "PhysicsBackend", "Push", "StepReport"]
 
 
 @dataclass(frozen=True)
@@ -79,10 +69,10 @@ class PhysicsBackend(Protocol):
     time_s: float
     timestep_s: float
 
-    def reset(self, state: SimState) -> None:
+    def reset(self, state: RobotState) -> None:
         """Put the robot in ``state`` at time 0 (velocities included)."""
 
-    def state(self) -> SimState:
+    def state(self) -> RobotState:
         """Current state in wire conventions."""
 
     def contact_flags(self) -> list[bool]:

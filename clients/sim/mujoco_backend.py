@@ -63,8 +63,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from clients.sim.backend import Push, SimState, StepReport
+from clients.sim.backend import Push, StepReport
 from clients.sim.model_file import resolve_model_path, sole_contact_points
+from clients.state import RobotState
 from protocol.errors import PoiseError
 
 __all__ = [
@@ -372,7 +373,7 @@ class MujocoBackend:
         """The MuJoCo data (for viewers and tests; edit at your own risk)."""
         return self._data
 
-    def reset(self, state: SimState) -> None:
+    def reset(self, state: RobotState) -> None:
         """Put the robot in ``state`` at time 0 (velocities included).
 
         Quaternions are normalised; their sign is kept.
@@ -406,7 +407,7 @@ class MujocoBackend:
         mujoco.mj_forward(self._model, data)
         self._update_contact_flags()
 
-    def _check_lengths(self, state: SimState) -> None:
+    def _check_lengths(self, state: RobotState) -> None:
         expected = {
             "joint_position": len(self._qpos_index),
             "joint_velocity": len(self._dof_index),
@@ -420,12 +421,12 @@ class MujocoBackend:
             if value.shape != (length,):
                 raise ValueError(f"{field} has shape {value.shape}, expected ({length},)")
 
-    def state(self) -> SimState:
+    def state(self) -> RobotState:
         """Current state in wire conventions."""
         qpos, qvel = self._data.qpos, self._data.qvel
         base_q, base_v = self._base_qpos, self._base_dof
         w, x, y, z = qpos[base_q + 3 : base_q + 7]
-        return SimState(
+        return RobotState(
             joint_position=qpos[self._qpos_index],
             joint_velocity=qvel[self._dof_index],
             position_base_in_world=qpos[base_q : base_q + 3].copy(),

@@ -51,8 +51,9 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
-from clients.sim.backend import ContactPoint, Push, SimState, StepReport
+from clients.sim.backend import ContactPoint, Push, StepReport
 from clients.sim.model_file import resolve_model_path, sole_contact_points
+from clients.state import RobotState
 from protocol.errors import PoiseError
 
 __all__ = [
@@ -638,7 +639,7 @@ class ReferenceBackend:
 
     # ------------------------------------------------------- wire conventions
 
-    def reset(self, state: SimState) -> None:
+    def reset(self, state: RobotState) -> None:
         """Put the robot in ``state`` at time 0 (velocities included; anchors cleared).
 
         Raises:
@@ -683,10 +684,10 @@ class ReferenceBackend:
         self._report_explicit_forces()
         self._contact_flags = (self._contact_sum @ self._touching > 0.0).tolist()
 
-    def state(self) -> SimState:
+    def state(self) -> RobotState:
         """Current state in wire conventions."""
         rotation = pin.Quaternion(self._q[3:7]).toRotationMatrix()
-        return SimState(
+        return RobotState(
             joint_position=self._q[7:].copy(),
             joint_velocity=self._v[6:].copy(),
             position_base_in_world=self._q[:3].copy(),
@@ -695,9 +696,9 @@ class ReferenceBackend:
             angular_velocity_base_in_base=self._v[3:6].copy(),
         )
 
-    def standing_state(self) -> SimState:
+    def standing_state(self) -> RobotState:
         """The neutral pose at ``qpos0`` (soles on the ground for the built-ins), at rest."""
-        return SimState(
+        return RobotState(
             joint_position=self._qpos0[7:].copy(),
             joint_velocity=np.zeros(self._model.nv - 6),
             position_base_in_world=self._qpos0[:3].copy(),

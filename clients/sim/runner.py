@@ -18,9 +18,10 @@ from scipy.spatial.transform import Rotation
 
 from clients.client import ControllerClient
 from clients.layout import joint_slices, neutral_joint_position
-from clients.sim.backend import PhysicsBackend, SimState
+from clients.sim.backend import PhysicsBackend
 from clients.sim.scenario import Scenario
-from protocol.messages import Command, State, Welcome
+from clients.state import RobotState
+from protocol.messages import Command, Welcome
 
 __all__ = ["FALL_TILT_RAD", "RunRecord", "make_backend", "run_scenario", "standing_state"]
 
@@ -48,7 +49,7 @@ def make_backend(scenario: Scenario) -> PhysicsBackend:
     )
 
 
-def standing_state(welcome: Welcome, joint_overrides: dict[str, list[float]]) -> SimState:
+def standing_state(welcome: Welcome, joint_overrides: dict[str, list[float]]) -> RobotState:
     """Neutral pose (with overrides) at the standing height, at rest."""
     joints = list(welcome.joints)
     position = neutral_joint_position(joints)
@@ -57,7 +58,7 @@ def standing_state(welcome: Welcome, joint_overrides: dict[str, list[float]]) ->
         if name not in slices:
             raise ValueError(f"initial_joint_position: unknown joint {name!r}")
         position[slices[name][0]] = value
-    return SimState(
+    return RobotState(
         joint_position=position,
         joint_velocity=np.zeros(sum(j.nv for j in joints)),
         position_base_in_world=np.array(welcome.standing_position_base_in_world),
@@ -74,7 +75,7 @@ class RunRecord:
     scenario: Scenario
     welcome: Welcome
     time_s: list[float] = field(default_factory=list)
-    states: list[SimState] = field(default_factory=list)
+    states: list[RobotState] = field(default_factory=list)
     commands: list[Command] = field(default_factory=list)
     contact_flags: list[list[bool]] = field(default_factory=list)
     fell: bool = False
@@ -93,7 +94,7 @@ class RunRecord:
         return self.simulated_s / self.wall_time_s if self.wall_time_s > 0 else float("nan")
 
 
-def _fall_reason(state: SimState, standing_height_m: float, non_foot_contact: bool) -> str:
+def _fall_reason(state: RobotState, standing_height_m: float, non_foot_contact: bool) -> str:
     if non_foot_contact:
         return "non-foot contact with the ground"
     if state.position_base_in_world[2] < FALL_HEIGHT_FRACTION * standing_height_m:
@@ -134,21 +135,8 @@ def run_scenario(
         for tick in range(ticks):
             state = backend.state()
             flags = backend.contact_flags()
-            command = client.step(
-                State(
-                    time_s=backend.time_s,
-                    joint_position=state.joint_position,
-                    joint_velocity=state.joint_velocity,
-                    position_base_in_world=state.position_base_in_world,
-                    orientation_base_in_world_xyzw=state.orientation_base_in_world_xyzw,
-                    linear_velocity_base_in_world=state.linear_velocity_base_in_world,
-                    angular_velocity_base_in_base=state.angular_velocity_base_in_base,
-                    contact_flags=flags,
-                    contact_wrench_in_world=(
-                        backend.contact_wrenches_in_world().reshape(-1) if measured else None
-                    ),
-                )
-            )
+            wrenches = backend.contact_wrenches_in_world() if measured else None
+            command = client.step(state.to_message(backend.time_s, flags, wrenches))
             record.time_s.append(tick / scenario.control_rate_hz)
             record.states.append(state)
             record.commands.append(command)

@@ -5,11 +5,10 @@ import pinocchio as pin
 import pytest
 
 from clients import ControllerClient, ServerError
-from clients.sim.backend import SimState
 from clients.sim.model_file import builtin_model_path
 from clients.sim.runner import make_backend, standing_state
 from clients.sim.scenario import Scenario
-from protocol.messages import State
+from clients.state import RobotState
 
 pytestmark = pytest.mark.e2e
 
@@ -57,7 +56,7 @@ def backend_for(name, model, **kwargs):
 def test_passive_model_falls_as_free_fall_predicts(backend_name):
     backend = backend_for(backend_name, "thesis_humanoid")
     joints = 39
-    start = SimState(
+    start = RobotState(
         joint_position=np.tile([0.0, 0.0, 0.0, 1.0], 13),
         joint_velocity=np.zeros(joints),
         position_base_in_world=np.array([0.0, 0.0, 1.5]),
@@ -87,7 +86,7 @@ def test_frictionless_swinging_chain_conserves_energy(backend_name, tmp_path):
     model = pin.buildModelFromMJCF(str(path))
     data = model.createData()
     backend.reset(
-        SimState(
+        RobotState(
             joint_position=np.array(
                 [0.8, *pin.Quaternion(pin.rpy.rpyToMatrix(0.3, 0.5, 0.0)).coeffs()]
             ),
@@ -151,18 +150,7 @@ def test_static_pose_with_server_torques_stays_within_a_millimetre(backend_name,
         positions = []
         for tick in range(2300):
             state = backend.state()
-            command = client.step(
-                State(
-                    time_s=backend.time_s,
-                    joint_position=state.joint_position,
-                    joint_velocity=state.joint_velocity,
-                    position_base_in_world=state.position_base_in_world,
-                    orientation_base_in_world_xyzw=state.orientation_base_in_world_xyzw,
-                    linear_velocity_base_in_world=state.linear_velocity_base_in_world,
-                    angular_velocity_base_in_base=state.angular_velocity_base_in_base,
-                    contact_flags=backend.contact_flags(),
-                )
-            )
+            command = client.step(state.to_message(backend.time_s, backend.contact_flags()))
             backend.step(command.joint_torque, [])
             if tick >= 300:  # the contacts settle (penalty sink) in the first 0.3 s
                 positions.append(backend.state().position_base_in_world.copy())

@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 mujoco = pytest.importorskip("mujoco")
 pin = pytest.importorskip("pinocchio")
 
-from clients.sim.backend import Push, SimState  # noqa: E402
+from clients.sim.backend import Push  # noqa: E402
 from clients.sim.model_file import resolve_model_path  # noqa: E402
 from clients.sim.mujoco_backend import (  # noqa: E402
     GRAVITY_M_S2,
@@ -24,6 +24,7 @@ from clients.sim.mujoco_backend import (  # noqa: E402
     SimulationDiverged,
     UnsupportedModel,
 )
+from clients.state import RobotState  # noqa: E402
 
 MODELS = ["thesis_humanoid", "revolute_humanoid", "dino_biped"]
 FLOATING_HEIGHT_M = 5.0  # far above the floor: no contact
@@ -45,11 +46,11 @@ def joint_layout(model) -> list[tuple[str, int, int]]:
     ]
 
 
-def neutral_state(model, height_m: float = FLOATING_HEIGHT_M) -> SimState:
+def neutral_state(model, height_m: float = FLOATING_HEIGHT_M) -> RobotState:
     position = np.concatenate(
         [[0.0, 0.0, 0.0, 1.0] if nq == 4 else np.zeros(nq) for _, nq, _ in joint_layout(model)]
     )
-    return SimState(
+    return RobotState(
         joint_position=position,
         joint_velocity=np.zeros(model.nv - 6),
         position_base_in_world=np.array([0.0, 0.0, height_m]),
@@ -64,12 +65,12 @@ def random_unit_quaternion(rng: np.random.Generator) -> np.ndarray:
     return quaternion / np.linalg.norm(quaternion)
 
 
-def random_state(model, rng: np.random.Generator) -> SimState:
+def random_state(model, rng: np.random.Generator) -> RobotState:
     parts = [
         random_unit_quaternion(rng) if nq == 4 else rng.uniform(-1.0, 1.0, nq)
         for _, nq, _ in joint_layout(model)
     ]
-    return SimState(
+    return RobotState(
         joint_position=np.concatenate(parts),
         joint_velocity=rng.normal(0.0, 1.0, model.nv - 6),
         position_base_in_world=rng.normal(0.0, 0.3, 3) + np.array([0.0, 0.0, 1.0]),
@@ -79,7 +80,7 @@ def random_state(model, rng: np.random.Generator) -> SimState:
     )
 
 
-def pinocchio_q_v(state: SimState) -> tuple[np.ndarray, np.ndarray]:
+def pinocchio_q_v(state: RobotState) -> tuple[np.ndarray, np.ndarray]:
     """Wire → Pinocchio: ``q = [p, quat_xyzw, joints]``, ``v = [Rᵀ v_world, ω_base, joints]``."""
     rotation = Rotation.from_quat(state.orientation_base_in_world_xyzw).as_matrix()
     q = np.concatenate(
@@ -95,7 +96,7 @@ def pinocchio_q_v(state: SimState) -> tuple[np.ndarray, np.ndarray]:
     return q, v
 
 
-def rotation_error(state: SimState, model) -> np.ndarray:
+def rotation_error(state: RobotState, model) -> np.ndarray:
     """Per wire DoF: hinge angle, or the ball joint's rotation vector (child in parent)."""
     errors, iq = [], 0
     for _, nq, _ in joint_layout(model):
@@ -105,7 +106,7 @@ def rotation_error(state: SimState, model) -> np.ndarray:
     return np.concatenate(errors)
 
 
-def standing_state(backend: MujocoBackend, model) -> SimState:
+def standing_state(backend: MujocoBackend, model) -> RobotState:
     """Neutral pose with the lowest sole site exactly on the ground."""
     state = neutral_state(model)
     backend.reset(state)
@@ -114,13 +115,13 @@ def standing_state(backend: MujocoBackend, model) -> SimState:
     return state
 
 
-def centroidal_momentum(model, data, state: SimState) -> np.ndarray:
+def centroidal_momentum(model, data, state: RobotState) -> np.ndarray:
     """``[linear momentum (world), angular momentum about the CoM (world axes)]``."""
     q, v = pinocchio_q_v(state)
     return pin.computeCentroidalMomentum(model, data, q, v).vector.copy()
 
 
-def pose_holder(model, data, reference: SimState, dt: float, feedforward=None):
+def pose_holder(model, data, reference: RobotState, dt: float, feedforward=None):
     """Stiff PD about the neutral pose: ``τ = τ_ff − Kp (q − q₀) − Kd v`` per DoF.
 
     Ball-joint errors are rotation vectors. Gains are as stiff as explicit
@@ -133,7 +134,7 @@ def pose_holder(model, data, reference: SimState, dt: float, feedforward=None):
     damping = np.minimum(100.0, 0.25 / (dt * inverse_inertia))
     offset = np.zeros(model.nv - 6) if feedforward is None else feedforward
 
-    def torque(state: SimState) -> np.ndarray:
+    def torque(state: RobotState) -> np.ndarray:
         error = rotation_error(state, model)
         return offset - stiffness * error - damping * state.joint_velocity
 
@@ -364,7 +365,7 @@ def test_push_on_an_unknown_body_names_the_bodies():
 # -- standing on the ground ---------------------------------------------------------------
 
 
-def static_feedforward(model, data, state: SimState, frames: tuple[str, ...]) -> np.ndarray:
+def static_feedforward(model, data, state: RobotState, frames: tuple[str, ...]) -> np.ndarray:
     """Joint torques of a static equilibrium with min-norm foot wrenches (Pinocchio)."""
     q, _ = pinocchio_q_v(state)
     gravity = pin.computeGeneralizedGravity(model, data, q)

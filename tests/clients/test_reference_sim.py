@@ -13,7 +13,7 @@ import pinocchio as pin
 import pytest
 from scipy.spatial.transform import Rotation
 
-from clients.sim.backend import Push, SimState
+from clients.sim.backend import Push
 from clients.sim.model_file import builtin_model_path
 from clients.sim.reference import (
     BodyNotFound,
@@ -22,6 +22,7 @@ from clients.sim.reference import (
     box_corners_in_bodies,
     mjcf_gravity_in_world,
 )
+from clients.state import RobotState
 
 GRAVITY_M_PER_S2 = 9.81
 BUILTIN_MODELS = ["thesis_humanoid", "revolute_humanoid", "dino_biped"]
@@ -379,7 +380,7 @@ def test_push_changes_momentum_by_its_impulse(body, point_in_body_m):
 # ------------------------------------------------------------ wire conventions
 
 
-def random_sim_state(backend: ReferenceBackend, rng: np.random.Generator) -> SimState:
+def random_sim_state(backend: ReferenceBackend, rng: np.random.Generator) -> RobotState:
     model = backend.pinocchio_model
     parts = []
     for joint in model.joints[2:]:
@@ -387,7 +388,7 @@ def random_sim_state(backend: ReferenceBackend, rng: np.random.Generator) -> Sim
             parts.append(Rotation.from_rotvec(rng.normal(0, 0.5, 3)).as_quat())
         else:
             parts.append(rng.uniform(-1, 1, joint.nq))
-    return SimState(
+    return RobotState(
         joint_position=np.concatenate(parts),
         joint_velocity=rng.normal(0, 1, model.nv - 6),
         position_base_in_world=rng.normal(0, 1, 3),
