@@ -19,8 +19,9 @@ import numpy as np
 import zmq
 
 from clients import ControllerClient
-from clients.scripted import KinematicState, perturbed_pose
+from clients.scripted import perturbed_pose
 from clients.server_process import ServerProcess
+from clients.state import RobotState
 from protocol import encode
 
 
@@ -69,7 +70,7 @@ def main() -> None:
         welcome = client.connect(args.model)
         joints = list(welcome.joints)
         nv = sum(j.nv for j in joints)
-        state = KinematicState(
+        state = RobotState(
             perturbed_pose(joints, 0.05),
             np.zeros(nv),
             np.array(welcome.standing_position_base_in_world),

@@ -70,3 +70,15 @@ def test_hello_client_example_runs(server):
     assert "tick 4" in output
     forces = [float(x) for x in re.findall(r"ground force\s+([\d.]+) N", output)]
     assert all(abs(f - 65.0 * 9.81) < 1.0 for f in forces), output
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize(
+    ("script", "args"),
+    [("roundtrip.py", ["--count", "50"]), ("controller.py", ["--ticks", "30"])],
+)
+def test_benchmarks_run_and_print_ratios(script, args):
+    output = subprocess.check_output(
+        [sys.executable, str(ROOT / "bench" / script), *args], text=True, cwd=ROOT, timeout=300
+    )
+    assert re.search(r"\d+\.\dx", output), output
