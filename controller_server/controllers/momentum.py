@@ -80,8 +80,8 @@ class MomentumController(Controller):
 
     name = "momentum"
     PARAMETERS: ClassVar[dict[str, ParamSpec]] = {
-        "stiffness": ParamSpec(100.0, minimum=0.0, maximum=1e5, doc="k_s of eq. 5.3 (1/s²)"),
-        "damping": ParamSpec(20.0, minimum=0.0, maximum=1e4, doc="k_d of eq. 5.3 (1/s)"),
+        "stiffness": ParamSpec(30.0, minimum=0.0, maximum=1e5, doc="k_s of eq. 5.3 (1/s²)"),
+        "damping": ParamSpec(11.0, minimum=0.0, maximum=1e4, doc="k_d of eq. 5.3 (1/s)"),
         "weight_tracking": ParamSpec(1.0, minimum=0.0, maximum=1e6, doc="β_t of eq. 5.1 (1)"),
         "joint_weights": ParamSpec(
             None,
