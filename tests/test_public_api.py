@@ -45,6 +45,7 @@ PACKAGES = [
     "clients.sim.metrics",
     "clients.sim.plots",
     "clients.sim.app",
+    "clients.sim.errors",
 ]
 
 

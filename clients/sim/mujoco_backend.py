@@ -64,9 +64,9 @@ import mujoco
 import numpy as np
 
 from clients.sim.backend import Push, StepReport
+from clients.sim.errors import SimulationDiverged, UnsupportedModel
 from clients.sim.model_file import resolve_model_path, sole_contact_points
 from clients.state import RobotState
-from protocol.errors import PoiseError
 
 __all__ = [
     "GRAVITY_M_S2",
@@ -97,35 +97,6 @@ _DIVERGENCE_WARNINGS = tuple(
         mujoco.mjtWarning.mjWARN_BADQACC,
     )
 )
-
-
-class UnsupportedModel(PoiseError, ValueError):
-    """The model cannot be simulated with the wire conventions.
-
-    Attributes:
-        path: The model file.
-        detail: What is wrong and how to fix it.
-    """
-
-    def __init__(self, path: Path, detail: str):
-        self.path = path
-        self.detail = detail
-        super().__init__(f"{path}: {detail}")
-
-
-class SimulationDiverged(PoiseError, RuntimeError):
-    """MuJoCo found a non-finite or huge state and reset its data.
-
-    Attributes:
-        time_s: Simulation time of the step that diverged (s).
-    """
-
-    def __init__(self, time_s: float):
-        self.time_s = time_s
-        super().__init__(
-            f"MuJoCo diverged in the step at {time_s=:.4f} and reset the robot to the "
-            "model file's pose; call reset() (a smaller timestep_s or gentler torques help)"
-        )
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -244,7 +215,7 @@ class MujocoBackend:
     # -- construction -----------------------------------------------------------------
 
     def _fail(self, detail: str) -> UnsupportedModel:
-        return UnsupportedModel(self.model_path, detail)
+        return UnsupportedModel(f"{self.model_path}: {detail}")
 
     def _map_base(self) -> None:
         model = self._model
@@ -482,7 +453,12 @@ class MujocoBackend:
         warnings = sum(int(counts[w]) for w in _DIVERGENCE_WARNINGS)
         if warnings != self._divergence_warnings:
             self._divergence_warnings = warnings
-            raise SimulationDiverged(self.time_s)
+            raise SimulationDiverged(
+                self.name,
+                self.time_s,
+                "MuJoCo reset the robot to the model file's pose; call reset() "
+                "(a smaller timestep_s or gentler torques help)",
+            )
         self._step_count += 1
         self.time_s = self._step_count * self.timestep_s
         self._update_contact_flags()

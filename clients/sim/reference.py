@@ -52,6 +52,7 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from clients.sim.backend import ContactPoint, Push, StepReport
+from clients.sim.errors import SimulationDiverged, UnsupportedModel
 from clients.sim.model_file import resolve_model_path, sole_contact_points
 from clients.state import RobotState
 from protocol.errors import PoiseError
@@ -85,26 +86,6 @@ class BodyNotFound(PoiseError, KeyError):
         self.name = name
         self.available = available
         super().__init__(f"no body {name!r} in the model; bodies: {', '.join(available)}")
-
-
-class SimulationDiverged(PoiseError, FloatingPointError):
-    """A step produced a non-finite velocity; ``q``, ``v`` and time stay as before the step.
-
-    Attributes:
-        time_s: Simulation time at the start of the failed step.
-    """
-
-    def __init__(self, time_s: float, largest_torque: float):
-        self.time_s = time_s
-        super().__init__(
-            f"the state became non-finite in the step at {time_s=:.4f} "
-            f"(largest |joint_torque| {largest_torque:.3g}); the lightest links cannot "
-            "take such torques at this time step: reduce the torques or timestep_s"
-        )
-
-
-class UnsupportedModel(PoiseError, ValueError):
-    """The MJCF uses something the reference simulator cannot represent."""
 
 
 def _floats(text: str | None, count: int, default: tuple[float, ...]) -> np.ndarray:
@@ -628,7 +609,13 @@ class ReferenceBackend:
         self._update_wrenches()
         velocity = self._v + self.timestep_s * acceleration
         if not np.isfinite(velocity).all():
-            raise SimulationDiverged(self.time_s, float(np.abs(torque).max(initial=0.0)))
+            largest_torque = float(np.abs(torque).max(initial=0.0))
+            raise SimulationDiverged(
+                self.name,
+                self.time_s,
+                f"largest |joint_torque| {largest_torque:.3g}; the lightest links cannot take "
+                "such torques at this time step: reduce the torques or timestep_s",
+            )
         self._v = velocity
         self._q = pin.integrate(model, self._q, self.timestep_s * velocity)
         self._steps += 1

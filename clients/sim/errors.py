@@ -1,0 +1,25 @@
+"""Errors shared by the simulator backends."""
+
+from __future__ import annotations
+
+from protocol.errors import PoiseError
+
+__all__ = ["SimulationDiverged", "UnsupportedModel"]
+
+
+class UnsupportedModel(PoiseError, ValueError):
+    """A model file uses something a backend cannot simulate; the message says what."""
+
+
+class SimulationDiverged(PoiseError, FloatingPointError):
+    """A step produced a non-finite (or, in MuJoCo, huge) state.
+
+    Attributes:
+        backend: Which backend diverged.
+        time_s: Simulation time at the start of the failed step (s).
+    """
+
+    def __init__(self, backend: str, time_s: float, detail: str):
+        self.backend = backend
+        self.time_s = time_s
+        super().__init__(f"{backend}: the state diverged in the step at {time_s=:.4f}; {detail}")
