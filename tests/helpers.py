@@ -7,7 +7,6 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from clients.sampling import random_state  # noqa: F401  (re-exported for tests)
-from controller_server.models import BUILTIN_MODELS
 from protocol.messages import Command, State, Welcome
 
 
@@ -52,37 +51,24 @@ class IndependentDynamics:
         wrenches = command.contact_wrench_in_world.reshape(-1, 6)
         point_forces = command.contact_force_in_world.reshape(-1, 3)
         from_points = np.zeros_like(generalized)
+        from_wrenches = np.zeros_like(generalized)
         index = 0
         for contact, wrench in zip(self.welcome.contacts, wrenches, strict=True):
             frame_id = self.model.getFrameId(contact.frame)
             jacobian = pin.getFrameJacobian(
                 self.model, self.data, frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
             )
-            generalized -= jacobian.T @ wrench
+            from_wrenches += jacobian.T @ wrench
             rotation_frame = self.data.oMf[frame_id].rotation
             for point in contact.points_in_frame:
                 offset = rotation_frame @ np.array(point)
                 point_jacobian = jacobian[:3] - pin.skew(offset) @ jacobian[3:]
                 from_points += point_jacobian.T @ point_forces[index]
                 index += 1
+        generalized -= from_wrenches
+        # Distributed mode: the point forces and the per-contact wrenches agree
+        # (measured mode sends no point forces).
         self.point_force_mismatch = (
-            float(np.abs(from_points).max()) if not point_forces.any() else 0.0
+            float(np.abs(from_points - from_wrenches).max()) if point_forces.any() else 0.0
         )
-        if point_forces.any():
-            # Distributed mode: the point forces and the per-contact wrenches agree.
-            wrench_generalized = sum(
-                pin.getFrameJacobian(
-                    self.model,
-                    self.data,
-                    self.model.getFrameId(c.frame),
-                    pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
-                ).T
-                @ w
-                for c, w in zip(self.welcome.contacts, wrenches, strict=True)
-            )
-            self.point_force_mismatch = float(np.abs(from_points - wrench_generalized).max())
         return float(np.abs(generalized).max())
-
-
-def builtin_path(name: str) -> str:
-    return str(BUILTIN_MODELS[name])
