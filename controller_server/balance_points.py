@@ -7,7 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["center_of_pressure", "centroidal_moment_pivot", "support_polygon"]
+__all__ = [
+    "center_of_pressure",
+    "centroidal_moment_pivot",
+    "closest_point_in_polygon",
+    "shrink_polygon",
+    "support_polygon",
+]
 
 MIN_NORMAL_FORCE_N = 1e-6
 """Below this total normal force the COP and CMP are undefined (NaN)."""
@@ -83,3 +89,50 @@ def support_polygon(points_in_world: np.ndarray) -> np.ndarray:
 
     lower, upper = chain(points), chain(points[::-1])
     return np.array(lower[:-1] + upper[:-1])
+
+
+def shrink_polygon(polygon_xy: np.ndarray, margin: float) -> np.ndarray:
+    """Move every edge of a convex counter-clockwise polygon inward by ``margin`` (m).
+
+    Each new vertex is where the two offset edges around an old vertex meet.
+    A polygon too small for the margin (or with fewer than three vertices)
+    collapses to its vertex mean, a single point.
+    """
+    polygon_xy = np.asarray(polygon_xy, dtype=float).reshape(-1, 2)
+    centre = polygon_xy.mean(axis=0, keepdims=True) if len(polygon_xy) else np.zeros((1, 2))
+    if len(polygon_xy) < 3 or margin <= 0.0:
+        return polygon_xy if margin <= 0.0 else centre
+    edges = np.roll(polygon_xy, -1, axis=0) - polygon_xy
+    normals = np.column_stack([edges[:, 1], -edges[:, 0]])  # outward for counter-clockwise
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    offsets = np.einsum("ij,ij->i", normals, polygon_xy) - margin
+    previous = np.roll(np.arange(len(polygon_xy)), 1)
+    shrunk = np.empty_like(polygon_xy)
+    for i, j in enumerate(previous):
+        lines = np.vstack([normals[j], normals[i]])
+        shrunk[i] = np.linalg.solve(lines, [offsets[j], offsets[i]])
+    # Too much margin turns the offset polygon inside out.
+    shrunk_edges = np.roll(shrunk, -1, axis=0) - shrunk
+    if np.any(np.einsum("ij,ij->i", shrunk_edges, edges) <= 0.0):
+        return centre
+    return shrunk
+
+
+def closest_point_in_polygon(point_xy: np.ndarray, polygon_xy: np.ndarray) -> np.ndarray:
+    """The point of a convex counter-clockwise polygon (segment, point) nearest ``point_xy``."""
+    point_xy = np.asarray(point_xy, dtype=float)
+    polygon_xy = np.asarray(polygon_xy, dtype=float).reshape(-1, 2)
+    if len(polygon_xy) >= 3:
+        edges = np.roll(polygon_xy, -1, axis=0) - polygon_xy
+        outward = edges[:, 1] * (point_xy[0] - polygon_xy[:, 0]) - edges[:, 0] * (
+            point_xy[1] - polygon_xy[:, 1]
+        )
+        if np.all(outward <= 0.0):
+            return point_xy.copy()
+    starts = polygon_xy
+    ends = np.roll(polygon_xy, -1, axis=0)
+    segments = ends - starts
+    lengths_squared = np.maximum(np.einsum("ij,ij->i", segments, segments), 1e-300)
+    fractions = np.clip(np.einsum("ij,ij->i", point_xy - starts, segments) / lengths_squared, 0, 1)
+    candidates = starts + fractions[:, None] * segments
+    return candidates[np.argmin(np.linalg.norm(candidates - point_xy, axis=1))]

@@ -9,19 +9,16 @@ every contact (the thesis' penalty forces, or force sensors) and ``τ``
 compensates it, as in the thesis. *Distributed*: the six root rows have no
 actuator, so the contact forces ``f`` of the supporting feet must balance
 them, within linearized (pyramid) friction cones on a flat ground of normal
-+z (``f_z ≥ 0``, ``|f_x|, |f_y| ≤ μ f_z`` at every support point). The
-distribution is the smallest force that balances exactly::
++z (``f_z ≥ 0``, ``|f_x|, |f_y| ≤ μ f_z`` at every support point).
 
-    min_f ‖f‖²   s.t.  J_c,rootᵀ f = (M q̈ + h)_root,  f in the cones
-
-and, when no force in the cones can (centre of pressure outside the feet,
-too much traction), the least-squares balance
-``min_f ‖J_c,rootᵀ f − (M q̈ + h)_root‖² + ε ‖f‖²``. Both are QPs solved by a
-maintained solver through ``qpsolvers``. The actuated rows give
-``τ``, clipped to the torque limits. When the cones or the limits cannot
-realize ``q̈`` exactly, the returned acceleration is the one ``τ`` and ``f``
-really produce, ``q̈ = M⁻¹ (Sᵀ τ + J_cᵀ f − h)``, so the command is always
-dynamically consistent; the unbalanced root wrench is reported.
+The common case is exact and needs no solver: the smallest forces that
+balance the root, ``f = Gᵀ (G Gᵀ)⁻¹ w``, lie in the cones and the torques
+within their limits. Otherwise the requested ``q̈`` cannot happen (centre of
+pressure pushed off the feet, too much traction, saturated joints), and one
+QP finds the nearest motion that can, with its forces and torques
+(:func:`nearest_feasible_motion`). Either way the returned acceleration is
+the one ``τ`` and ``f`` really produce, ``q̈ = M⁻¹ (Sᵀ τ + J_cᵀ f − h)``, so
+the command is always dynamically consistent.
 """
 
 from __future__ import annotations
@@ -39,8 +36,9 @@ from controller_server.spatial import cross
 
 __all__ = [
     "InverseDynamicsResult",
-    "distribute_contact_forces",
     "friction_pyramid",
+    "minimum_norm_balance",
+    "nearest_feasible_motion",
     "solve_inverse_dynamics",
 ]
 
@@ -92,45 +90,6 @@ def _friction_pyramid(friction_coefficients: tuple[float, ...]) -> np.ndarray:
     return rows
 
 
-def distribute_contact_forces(
-    G: np.ndarray,
-    wrench: np.ndarray,
-    friction_coefficients: Sequence[float],
-    regularization: float,
-    qp_solver: str,
-) -> np.ndarray | None:
-    """Point forces ``f`` in the cones with ``G f = wrench``, or closest to it.
-
-    Args:
-        G: ``(6, 3p)`` map from point forces to the root wrench (``J_c,rootᵀ``).
-        wrench: Root wrench to balance.
-        friction_coefficients: μ per point.
-        regularization: ``ε`` of the least-squares fallback.
-        qp_solver: Solver name for ``qpsolvers``.
-
-    Returns:
-        ``(3p,)`` forces, or ``None`` if the solver failed.
-    """
-    n = G.shape[1]
-    cones = friction_pyramid(friction_coefficients)
-    # The unconstrained minimum-norm balance f = Gᵀ (G Gᵀ)⁻¹ w solves the QP whenever
-    # it already lies in the cones (the common case when standing): no solver call.
-    try:
-        minimum_norm = G.T @ np.linalg.solve(G @ G.T, wrench)
-    except np.linalg.LinAlgError:
-        minimum_norm = None
-    if minimum_norm is not None and np.all(cones @ minimum_norm <= 1e-9 * max(1.0, abs(wrench[2]))):
-        return minimum_norm
-    zeros = np.zeros(cones.shape[0])
-    forces = qpsolvers.solve_qp(
-        np.eye(n), np.zeros(n), cones, zeros, A=G, b=wrench, solver=qp_solver
-    )
-    if forces is None or not np.all(np.isfinite(forces)):
-        P = G.T @ G + regularization * np.eye(n)
-        forces = qpsolvers.solve_qp(P, -G.T @ wrench, cones, zeros, solver=qp_solver)
-    return forces if forces is not None and np.all(np.isfinite(forces)) else None
-
-
 def solve_inverse_dynamics(
     terms: DynamicsTerms,
     acceleration: np.ndarray,
@@ -140,9 +99,10 @@ def solve_inverse_dynamics(
     *,
     measured_wrenches: np.ndarray | None = None,
     force_regularization: float = 1e-6,
+    support_weight: float = 100.0,
     qp_solver: str = "daqp",
 ) -> InverseDynamicsResult:
-    """Torques and contact forces realizing ``acceleration`` (eq. 4.2).
+    """Torques and contact forces realizing ``acceleration`` (eq. 4.2), or the nearest they can.
 
     Args:
         terms: Dynamics at the current state.
@@ -152,12 +112,12 @@ def solve_inverse_dynamics(
         torque_limit: ``(nv − 6,)`` symmetric limits.
         measured_wrenches: ``(contacts, 6)`` measured ground wrenches (measured
             mode), or ``None`` to distribute forces.
-        force_regularization: ``ε`` of the least-squares fallback.
+        force_regularization: ``ε`` on ``‖f‖²`` when ``q̈`` cannot be realized.
+        support_weight: ``w_s`` per kg of robot mass on the supports' acceleration
+            when ``q̈`` cannot be realized (see :func:`nearest_feasible_motion`).
         qp_solver: Any solver name ``qpsolvers`` knows.
     """
     M, h = terms.mass_matrix, terms.bias_forces
-    generalized_force = M @ acceleration + h
-    root_wrench = generalized_force[:NUM_ROOT_DOFS]
     counts = [J.shape[0] // 3 for J in terms.point_jacobians]
     forces = np.zeros((sum(counts), 3))
     if measured_wrenches is not None:
@@ -166,52 +126,211 @@ def solve_inverse_dynamics(
             (J.T @ w for J, w in zip(terms.support_jacobians, wrenches, strict=True)),
             np.zeros_like(h),
         )
-    else:
-        contact_generalized_force, forces = _distribute(
-            terms, root_wrench, supports, friction_coefficients, force_regularization, qp_solver
+        return _realize(
+            terms, acceleration, contact_generalized_force, forces, wrenches, torque_limit
         )
-        wrenches = _wrenches_from_point_forces(terms, forces, counts)
 
-    residual = float(np.linalg.norm(root_wrench - contact_generalized_force[:NUM_ROOT_DOFS]))
+    point_jacobian, mus = _support_points(terms, supports, friction_coefficients, counts)
+    mask = np.concatenate([np.full(count, on) for count, on in zip(counts, supports, strict=True)])
+    generalized_force = M @ acceleration + h
+    solution = None
+    if point_jacobian.shape[0]:
+        solution = minimum_norm_balance(
+            point_jacobian[:, :NUM_ROOT_DOFS].T, generalized_force[:NUM_ROOT_DOFS], mus
+        )
+    if solution is not None or not any(supports):
+        point_force = np.zeros(point_jacobian.shape[0]) if solution is None else solution
+        contact_generalized_force = point_jacobian.T @ point_force
+        torque = (generalized_force - contact_generalized_force)[NUM_ROOT_DOFS:]
+        exact = solution is not None or np.allclose(generalized_force[:NUM_ROOT_DOFS], 0.0)
+        if exact and np.all(np.abs(torque) <= torque_limit):
+            forces[mask] = point_force.reshape(-1, 3)
+            wrenches = _wrenches_from_point_forces(terms, forces, counts)
+            return InverseDynamicsResult(torque, forces, wrenches, acceleration.copy(), 0.0, 0)
+    nearest = nearest_feasible_motion(
+        terms,
+        acceleration,
+        point_jacobian,
+        [J for J, on in zip(terms.support_jacobians, supports, strict=True) if on],
+        [d for d, on in zip(terms.support_drifts, supports, strict=True) if on],
+        mus,
+        torque_limit,
+        force_regularization,
+        support_weight * terms.total_mass,
+        qp_solver,
+    )
+    if nearest is None:
+        # No solver answer: least-squares forces, clipped torques (still consistent below).
+        point_force = _least_squares_balance(
+            point_jacobian[:, :NUM_ROOT_DOFS].T,
+            generalized_force[:NUM_ROOT_DOFS],
+            mus,
+            force_regularization,
+            qp_solver,
+        )
+        target = acceleration
+    else:
+        target, point_force = nearest
+    forces[mask] = point_force.reshape(-1, 3)
+    wrenches = _wrenches_from_point_forces(terms, forces, counts)
+    return _realize(terms, target, point_jacobian.T @ point_force, forces, wrenches, torque_limit)
+
+
+def _realize(
+    terms: DynamicsTerms,
+    acceleration: np.ndarray,
+    contact_generalized_force: np.ndarray,
+    forces: np.ndarray,
+    wrenches: np.ndarray,
+    torque_limit: np.ndarray,
+) -> InverseDynamicsResult:
+    """Clip ``τ`` for ``acceleration`` and return the ``q̈ = M⁻¹ (Sᵀτ + J_cᵀf − h)`` it makes."""
+    M, h = terms.mass_matrix, terms.bias_forces
+    generalized_force = M @ acceleration + h
+    residual = float(
+        np.linalg.norm((generalized_force - contact_generalized_force)[:NUM_ROOT_DOFS])
+    )
     torque_unclipped = (generalized_force - contact_generalized_force)[NUM_ROOT_DOFS:]
     joint_torque = np.clip(torque_unclipped, -torque_limit, torque_limit)
-    saturated = int(np.count_nonzero(joint_torque != torque_unclipped))
-
+    # Solver tolerances (~1e-9 relative) are not saturation.
+    saturated = int(np.count_nonzero(np.abs(joint_torque - torque_unclipped) > 1e-6))
     applied = contact_generalized_force - h
     applied[NUM_ROOT_DOFS:] += joint_torque
     realized = scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), applied)
     return InverseDynamicsResult(joint_torque, forces, wrenches, realized, residual, saturated)
 
 
-def _distribute(
+def _support_points(
     terms: DynamicsTerms,
-    root_wrench: np.ndarray,
     supports: Sequence[bool],
     friction_coefficients: Sequence[float],
-    regularization: float,
-    qp_solver: str,
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(J_cᵀ f, f per point)`` for forces at the supporting contacts' points."""
-    counts = [J.shape[0] // 3 for J in terms.point_jacobians]
-    forces = np.zeros((sum(counts), 3))
-    generalized = np.zeros_like(terms.bias_forces)
-    if not any(supports):
-        return generalized, forces
-    J_c = np.vstack([J for J, on in zip(terms.point_jacobians, supports, strict=True) if on])
+    counts: Sequence[int],
+) -> tuple[np.ndarray, list[float]]:
+    """``(3p, nv)`` point Jacobians of the supporting contacts, and μ per point."""
+    nv = terms.bias_forces.size
+    rows = [J for J, on in zip(terms.point_jacobians, supports, strict=True) if on]
     mus = [
         mu
         for mu, count, on in zip(friction_coefficients, counts, supports, strict=True)
         if on
         for _ in range(count)
     ]
-    solution = distribute_contact_forces(
-        J_c[:, :NUM_ROOT_DOFS].T, root_wrench, mus, regularization, qp_solver
+    return (np.vstack(rows) if rows else np.zeros((0, nv))), mus
+
+
+def minimum_norm_balance(
+    G: np.ndarray, wrench: np.ndarray, friction_coefficients: Sequence[float]
+) -> np.ndarray | None:
+    """``f = Gᵀ (G Gᵀ)⁻¹ w`` if it lies in the friction cones, else ``None``.
+
+    The smallest point forces that balance the root wrench exactly; when they
+    are admissible they also solve ``min ‖f‖² s.t. G f = w, f in cones`` (the
+    common case when standing), with no solver call.
+    """
+    try:
+        forces = G.T @ np.linalg.solve(G @ G.T, wrench)
+    except np.linalg.LinAlgError:
+        return None
+    cones = friction_pyramid(friction_coefficients)
+    if np.all(cones @ forces <= 1e-9 * max(1.0, abs(wrench[2]))):
+        return forces
+    return None
+
+
+def _least_squares_balance(
+    G: np.ndarray,
+    wrench: np.ndarray,
+    friction_coefficients: Sequence[float],
+    regularization: float,
+    qp_solver: str,
+) -> np.ndarray:
+    """``min ‖G f − w‖² + ε ‖f‖²`` over the cones (zeros if the solver fails)."""
+    n = G.shape[1]
+    if n == 0:
+        return np.zeros(0)
+    cones = friction_pyramid(friction_coefficients)
+    forces = qpsolvers.solve_qp(
+        G.T @ G + regularization * np.eye(n),
+        -G.T @ wrench,
+        cones,
+        np.zeros(cones.shape[0]),
+        solver=qp_solver,
     )
-    if solution is None:
-        return generalized, forces
-    mask = np.concatenate([np.full(count, on) for count, on in zip(counts, supports, strict=True)])
-    forces[mask] = solution.reshape(-1, 3)
-    return J_c.T @ solution, forces
+    return forces if forces is not None and np.all(np.isfinite(forces)) else np.zeros(n)
+
+
+def nearest_feasible_motion(
+    terms: DynamicsTerms,
+    acceleration: np.ndarray,
+    point_jacobian: np.ndarray,
+    support_jacobians: Sequence[np.ndarray],
+    support_drifts: Sequence[np.ndarray],
+    friction_coefficients: Sequence[float],
+    torque_limit: np.ndarray,
+    force_regularization: float,
+    support_weight: float,
+    qp_solver: str,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The realizable ``(q̈, f)`` closest to the request, by one QP (Gauss's principle).
+
+    When no forces in the cones balance the root for the requested ``q̈``
+    (centre of pressure pushed off the feet, too much traction) or the torques
+    would exceed their limits, the optimizer's ``q̈`` cannot happen. Rather
+    than clip and let the body go where it will, choose the nearest motion
+    that can, in the kinetic-energy metric::
+
+        min  ½ ‖q̈ − q̈_des‖²_M + ½ w_s ‖J_sup q̈ + J̇_sup q̇‖² + ½ ε ‖f‖²
+        s.t. (M q̈ + h)_root = (J_cᵀ f)_root          (the root is unactuated)
+             f in the friction pyramids
+             −τ_max ≤ (M q̈ + h − J_cᵀ f)_joints ≤ τ_max
+
+    The support term keeps the feet planted (``q̈_des`` already satisfies it,
+    eq. 5.1) without making the problem infeasible: for any ``f`` in the
+    cones, forward dynamics with clipped torques is a feasible point. This is
+    the unknowns-``[q̈, f]`` formulation of de Lasa et al. 2010 (§ 4) used as a
+    projection, not as the controller.
+
+    Returns:
+        ``(q̈, f)`` or ``None`` if the solver gives no finite answer.
+    """
+    M, h = terms.mass_matrix, terms.bias_forces
+    nv, forces = h.size, point_jacobian.shape[0]
+    hessian = np.zeros((nv + forces, nv + forces))
+    hessian[:nv, :nv] = M
+    gradient = np.zeros(nv + forces)
+    gradient[:nv] = -M @ acceleration
+    if support_jacobians:
+        J_sup = np.vstack(support_jacobians)
+        drift = np.concatenate(support_drifts)
+        hessian[:nv, :nv] += support_weight * J_sup.T @ J_sup
+        gradient[:nv] += support_weight * J_sup.T @ drift
+    hessian[nv:, nv:] = force_regularization * np.eye(forces)
+    # (M q̈ + h − J_cᵀ f) = [root wrench; τ]; the root rows are the equality.
+    dynamics = np.hstack([M, -point_jacobian.T])
+    cones = friction_pyramid(friction_coefficients)
+    inequality = np.vstack(
+        [
+            np.hstack([np.zeros((cones.shape[0], nv)), cones]),
+            dynamics[NUM_ROOT_DOFS:],
+            -dynamics[NUM_ROOT_DOFS:],
+        ]
+    )
+    joint_bias = h[NUM_ROOT_DOFS:]
+    bound = np.concatenate(
+        [np.zeros(cones.shape[0]), torque_limit - joint_bias, torque_limit + joint_bias]
+    )
+    solution = qpsolvers.solve_qp(
+        hessian,
+        gradient,
+        inequality,
+        bound,
+        A=dynamics[:NUM_ROOT_DOFS],
+        b=-h[:NUM_ROOT_DOFS],
+        solver=qp_solver,
+    )
+    if solution is None or not np.all(np.isfinite(solution)):
+        return None
+    return solution[:nv], solution[nv:]
 
 
 def _wrenches_from_point_forces(

@@ -31,6 +31,7 @@ import pinocchio as pin
 from controller_server.balance_points import (
     center_of_pressure,
     centroidal_moment_pivot,
+    shrink_polygon,
     support_polygon,
 )
 from controller_server.constraints import compute_support_equalities
@@ -47,6 +48,7 @@ from controller_server.features import (
     MotionClip,
     Objective,
     PointTarget,
+    admissible_linear_momentum_rate,
     angular_momentum_weight,
     compute_angular_momentum_objective,
     compute_linear_momentum_objective,
@@ -135,6 +137,12 @@ class MomentumController(Controller):
             maximum=10.0,
             doc="c_des − s on x, y: desired CM relative to the support centre (m)",
         ),
+        "cop_margin": ParamSpec(
+            0.02,
+            minimum=0.0,
+            maximum=1.0,
+            doc="L̇_des is limited so its COP stays this far inside the support polygon (m)",
+        ),
         "angular_momentum_gain": ParamSpec(
             10.0, minimum=0.0, maximum=1e6, doc="γ of eq. 5.17 (1/m)"
         ),
@@ -168,7 +176,13 @@ class MomentumController(Controller):
             1e-6,
             minimum=1e-12,
             maximum=1.0,
-            doc="ε on ‖f‖² when the cones cannot balance exactly (1/N²)",
+            doc="ε on ‖f‖² when q̈ cannot be realized exactly (1/kg)",
+        ),
+        "support_weight": ParamSpec(
+            100.0,
+            minimum=0.0,
+            maximum=1e6,
+            doc="w_s per kg on the supports' acceleration when q̈ cannot be realized (1)",
         ),
         "qp_solver": ParamSpec(
             "daqp",
@@ -312,6 +326,7 @@ class MomentumController(Controller):
             self.robot.torque_limit,
             measured_wrenches=control_input.contact_wrench_in_world if measured else None,
             force_regularization=p["force_regularization"],
+            support_weight=p["support_weight"],
             qp_solver=p["qp_solver"],
         )
         self._last_wrenches = dynamics.contact_wrench_in_world
@@ -384,6 +399,17 @@ class MomentumController(Controller):
                 support_velocity,
                 p["momentum_stiffness"],
                 p["momentum_damping"],
+            )
+            supporting = [
+                pts for pts, on in zip(terms.position_points_in_world, flags, strict=True) if on
+            ]
+            desired_rate = admissible_linear_momentum_rate(
+                desired_rate,
+                mass,
+                terms.position_com_in_world,
+                shrink_polygon(support_polygon(np.vstack(supporting)), p["cop_margin"]),
+                p["ground_height"],
+                float(np.linalg.norm(model.gravity.linear)),
             )
             objectives.append(
                 compute_linear_momentum_objective(

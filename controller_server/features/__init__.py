@@ -12,6 +12,7 @@ from controller_server.features.joint_limits import (
     soft_limit_gains,
 )
 from controller_server.features.linear_momentum import (
+    admissible_linear_momentum_rate,
     compute_linear_momentum_objective,
     desired_linear_momentum_rate,
 )
@@ -27,6 +28,7 @@ __all__ = [
     "Objective",
     "PointTarget",
     "RevoluteJointLimit",
+    "admissible_linear_momentum_rate",
     "angular_momentum_weight",
     "compute_angular_momentum_objective",
     "compute_linear_momentum_objective",

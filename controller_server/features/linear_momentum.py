@@ -9,16 +9,30 @@ Macchietto 2008, eq. 5.9–5.10, on the two horizontal axes only::
 thesis prints ``− k_d (L_des − L)``; that sign would pump momentum in, so the
 damping sign (as in eq. 6.1) is used. Rows are divided by ``m_T`` so the
 weight is comparable across robots (the rows are then CM accelerations, m/s²).
+
+The thesis notes (ch. 7.1) that this objective can drive the CM "too
+quickly", and a rate the ground cannot push is worse than none: with the
+angular momentum held, a horizontal rate ``L̇_xy`` needs the centre of
+pressure at ``p = c_xy − (c_z − h) L̇_xy / (m_T g)``, and the feet can only
+put it inside their support polygon. :func:`admissible_linear_momentum_rate`
+limits ``L̇_des`` to the rate whose ``p`` is the nearest point of the polygon
+shrunk by a margin (the admissible rate of Lee & Goswami 2012, here a
+projection in the COP plane).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from controller_server.balance_points import closest_point_in_polygon
 from controller_server.features.objective import Objective
 from controller_server.momentum import MomentumRates
 
-__all__ = ["compute_linear_momentum_objective", "desired_linear_momentum_rate"]
+__all__ = [
+    "admissible_linear_momentum_rate",
+    "compute_linear_momentum_objective",
+    "desired_linear_momentum_rate",
+]
 
 HORIZONTAL = slice(0, 2)
 
@@ -40,6 +54,36 @@ def desired_linear_momentum_rate(
         * (total_mass * velocity_support_center_in_world - momentum.linear_momentum)[HORIZONTAL]
     )
     return desired
+
+
+def admissible_linear_momentum_rate(
+    desired_rate: np.ndarray,
+    total_mass: float,
+    position_com_in_world: np.ndarray,
+    admissible_cop_polygon_xy: np.ndarray,
+    ground_height: float,
+    gravity: float = 9.81,
+) -> np.ndarray:
+    """``L̇_des`` with its horizontal part limited so the COP it needs is in the polygon.
+
+    Args:
+        desired_rate: ``L̇_des`` (N), z ignored and returned unchanged.
+        total_mass: ``m_T`` (kg).
+        position_com_in_world: ``c`` (m).
+        admissible_cop_polygon_xy: Counter-clockwise ``(m, 2)`` polygon where
+            the COP may go (the support polygon shrunk by a margin), m ≥ 1.
+        ground_height: Ground plane height ``h`` (m).
+        gravity: ``g`` (m/s²).
+    """
+    lever = (position_com_in_world[2] - ground_height) / (total_mass * gravity)
+    if lever <= 0.0 or len(admissible_cop_polygon_xy) == 0:
+        return desired_rate
+    com_xy = position_com_in_world[HORIZONTAL]
+    cop = com_xy - lever * desired_rate[HORIZONTAL]
+    admissible = desired_rate.copy()
+    cop_admissible = closest_point_in_polygon(cop, admissible_cop_polygon_xy)
+    admissible[HORIZONTAL] = (com_xy - cop_admissible) / lever
+    return admissible
 
 
 def compute_linear_momentum_objective(

@@ -4,7 +4,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from clients import ControllerClient, ServerError
+from clients import ControllerClient
 from clients.sim.model_file import builtin_model_path
 from clients.sim.runner import make_backend, standing_state
 from clients.sim.scenario import Scenario
@@ -125,22 +125,7 @@ def test_frictionless_swinging_chain_conserves_energy(backend_name, tmp_path):
     assert worst < 0.02 * (kinetic_scale + GRAVITY * 4.0)
 
 
-@pytest.mark.parametrize(
-    "backend_name",
-    [
-        pytest.param(
-            "reference",
-            marks=pytest.mark.xfail(
-                strict=True,
-                raises=ServerError,
-                reason="known defect (issue 4, open): with distributed ground forces the soft "
-                "penalty contact lets the light feet rock at ~250 Hz against the 1 kHz ankle "
-                "torques, and the loop diverges within 4 ms",
-            ),
-        ),
-        "mujoco",
-    ],
-)
+@pytest.mark.parametrize("backend_name", BACKENDS)
 def test_static_pose_with_server_torques_stays_within_a_millimetre(backend_name, server):
     """The server's tracking controller at the standing pose compensates gravity."""
     backend = backend_for(backend_name, "thesis_humanoid")
