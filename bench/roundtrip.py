@@ -19,7 +19,7 @@ import numpy as np
 import zmq
 
 from clients import ControllerClient
-from clients.scripted import perturbed_pose
+from clients.layout import neutral_joint_position
 from clients.server_process import ServerProcess
 from clients.state import RobotState
 from protocol import encode
@@ -71,7 +71,7 @@ def main() -> None:
         joints = list(welcome.joints)
         nv = sum(j.nv for j in joints)
         state = RobotState(
-            perturbed_pose(joints, 0.05),
+            neutral_joint_position(joints),
             np.zeros(nv),
             np.array(welcome.standing_position_base_in_world),
             np.array([0.0, 0.0, 0.0, 1.0]),

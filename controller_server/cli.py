@@ -1,7 +1,7 @@
-"""The ``poise`` command line: ``poise serve`` and ``poise demo``.
+"""The ``poise`` command line: ``poise serve``, ``poise sim`` and ``poise demo``.
 
-Later capabilities add subcommands here (``sim``, ``replay``, ``bridge``,
-``bench``); each is a function taking the parsed arguments.
+Later capabilities add subcommands here (``replay``, ``bridge``); each is a
+function taking the parsed arguments.
 """
 
 from __future__ import annotations
@@ -40,12 +40,7 @@ def _serve(args: argparse.Namespace) -> int:
 def _demo(args: argparse.Namespace) -> int:
     from clients.demo import run_demo
 
-    return run_demo(
-        model=args.model,
-        output_dir=Path(args.output),
-        duration_s=args.duration,
-        endpoint=args.connect,
-    )
+    return run_demo(Path(args.output), args.connect, args.backend, args.controller)
 
 
 def _sim(args: argparse.Namespace) -> int:
@@ -150,12 +145,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     demo = commands.add_parser(
         "demo",
-        help="start a server and run the demo client, write a plot",
-        description="Start `poise serve` on a free loopback port, run the scripted client against "
-        "it, and write a PNG plot and a JSON summary.",
+        help="the thesis humanoid balancing under pushes in the simulator, with plots",
+        description="Start `poise serve` on a free loopback port, run the thesis' push scenarios "
+        "(push_sequence, head_push) in the reference simulator as its client, write "
+        "DIR/report.json and DIR/<scenario>.png, print a summary. Exit code 1 if the robot fell.",
     )
     demo.add_argument(
-        "--model", default="thesis_humanoid", help="built-in model (default: thesis_humanoid)"
+        "--backend",
+        default="reference",
+        choices=["reference", "mujoco"],
+        help="physics backend (default: reference)",
     )
     demo.add_argument(
         "--controller",
@@ -167,10 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--output",
         default="out",
         metavar="DIR",
-        help="directory for demo.png and demo.json (default: out)",
-    )
-    demo.add_argument(
-        "--duration", type=float, default=2.0, metavar="SECONDS", help="simulated time (default: 2)"
+        help="directory for report.json and the plots (default: out)",
     )
     demo.add_argument(
         "--connect",

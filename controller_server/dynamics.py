@@ -99,21 +99,37 @@ def point_kinematics(
     ``data`` must hold ``computeJointJacobians``, ``forwardKinematics(q, v, 0)``
     and ``updateFramePlacements``.
     """
-    jacobian = pin.getFrameJacobian(model, data, frame_id, WORLD_ALIGNED)
-    velocity = pin.getFrameVelocity(model, data, frame_id, WORLD_ALIGNED)
-    drift = pin.getFrameClassicalAcceleration(model, data, frame_id, WORLD_ALIGNED)
-    offsets = points_in_frame @ data.oMf[frame_id].rotation.T  # (k, 3), world axes
+    return _points_on_frame(
+        pin.getFrameJacobian(model, data, frame_id, WORLD_ALIGNED),
+        pin.getFrameVelocity(model, data, frame_id, WORLD_ALIGNED),
+        pin.getFrameClassicalAcceleration(model, data, frame_id, WORLD_ALIGNED),
+        data.oMf[frame_id],
+        points_in_frame,
+    )
+
+
+def _points_on_frame(
+    jacobian: np.ndarray,
+    velocity: pin.Motion,
+    drift: pin.Motion,
+    placement: pin.SE3,
+    points_in_frame: np.ndarray,
+) -> PointKinematics:
+    """Points fixed to a frame, from the frame's world-aligned Jacobian, twist and drift."""
+    offsets = points_in_frame @ placement.rotation.T  # (k, 3), world axes
     count = len(offsets)
     # v_p = v_o + ω × r = v_o − [r]× ω, stacked over the k points: one (3k, 3) matrix.
     lever = stacked_skew(offsets)
     omega = velocity.angular
     omega_twice = skew(omega) @ skew(omega)
     # a_p = a_o + α × r + ω × (ω × r) at q̈ = 0 (App. C, eq. C.3 and C.7).
-    point_drift = (np.tile(drift.linear, count) - lever @ drift.angular).reshape(count, 3)
+    point_drift = drift.linear - (lever @ drift.angular).reshape(count, 3)
     return PointKinematics(
-        position_in_world=data.oMf[frame_id].translation + offsets,
-        velocity_in_world=(np.tile(velocity.linear, count) - lever @ omega).reshape(count, 3),
-        jacobian=np.tile(jacobian[:3], (count, 1)) - lever @ jacobian[3:],
+        position_in_world=placement.translation + offsets,
+        velocity_in_world=velocity.linear - (lever @ omega).reshape(count, 3),
+        jacobian=(jacobian[None, :3] - (lever @ jacobian[3:]).reshape(count, 3, -1)).reshape(
+            3 * count, -1
+        ),
         drift=(point_drift + offsets @ omega_twice.T).reshape(-1),
     )
 
@@ -150,8 +166,14 @@ def compute_dynamics_terms(
         jacobian = pin.getFrameJacobian(model, data, frame_id, WORLD_ALIGNED)
         drift = pin.getFrameClassicalAcceleration(model, data, frame_id, WORLD_ALIGNED)
         support_jacobians.append(jacobian)
-        support_drifts.append(np.concatenate([drift.linear, drift.angular]))
-        points = point_kinematics(model, data, frame_id, contact.points_in_frame)
+        support_drifts.append(drift.vector)
+        points = _points_on_frame(
+            jacobian,
+            pin.getFrameVelocity(model, data, frame_id, WORLD_ALIGNED),
+            drift,
+            data.oMf[frame_id],
+            contact.points_in_frame,
+        )
         point_jacobians.append(points.jacobian)
         point_drifts.append(points.drift)
         point_positions.append(points.position_in_world)

@@ -33,7 +33,6 @@ PACKAGES = [
     "controller_server.wire",
     "clients",
     "clients.client",
-    "clients.scripted",
     "clients.sampling",
     "clients.state",
     "clients.sim.backend",

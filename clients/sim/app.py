@@ -53,6 +53,7 @@ def run_scenarios(
 ) -> list[dict[str, Any]]:
     """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table."""
     output_dir.mkdir(parents=True, exist_ok=True)
+    progress = progress and sys.stderr.isatty()  # no carriage-return bars in logs
     reports = []
     with server_endpoint(endpoint) as address:
         for name in names:

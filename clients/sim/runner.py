@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from clients.client import ControllerClient
 from clients.layout import joint_slices, neutral_joint_position
@@ -99,8 +98,13 @@ def _fall_reason(state: RobotState, standing_height_m: float, non_foot_contact: 
         return "non-foot contact with the ground"
     if state.position_base_in_world[2] < FALL_HEIGHT_FRACTION * standing_height_m:
         return "base below half its standing height"
-    up = Rotation.from_quat(state.orientation_base_in_world_xyzw).apply([0.0, 0.0, 1.0])
-    if np.arccos(np.clip(up[2], -1.0, 1.0)) > FALL_TILT_RAD:
+    # z of the base's up axis in world, from the unit quaternion [x, y, z, w].
+    x, y = state.orientation_base_in_world_xyzw[:2]
+    norm_squared = float(
+        np.dot(state.orientation_base_in_world_xyzw, state.orientation_base_in_world_xyzw)
+    )
+    up_z = 1.0 - 2.0 * (x * x + y * y) / norm_squared
+    if np.arccos(np.clip(up_z, -1.0, 1.0)) > FALL_TILT_RAD:
         return "base tilted past 60°"
     return ""
 

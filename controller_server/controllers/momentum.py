@@ -124,7 +124,7 @@ class MomentumController(Controller):
             20.0, minimum=0.0, maximum=1e6, doc="l_d of eq. 6.6 (1/s per rad of violation)"
         ),
         "weight_linear_momentum": ParamSpec(
-            1.0, minimum=0.0, maximum=1e6, doc="β_bl of eq. 5.1 on CM-acceleration rows (1)"
+            10.0, minimum=0.0, maximum=1e6, doc="β_bl of eq. 5.1 on CM-acceleration rows (1)"
         ),
         "momentum_stiffness": ParamSpec(
             20.0, minimum=0.0, maximum=1e4, doc="k_s of eq. 5.9 (1/s²)"

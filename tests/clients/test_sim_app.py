@@ -47,7 +47,9 @@ def test_quiet_standing_in_mujoco_stays_up_with_report_and_plot(server, tmp_path
     )
     (report,) = reports
     assert not report["fell"]
-    assert report["com_excursion_m"] < 0.01
+    # The linear momentum objective moves the CM from over the ankles toward the
+    # middle of the feet (c_des, 6 cm ahead), slowly: a few centimetres in 0.5 s.
+    assert report["com_excursion_m"] < 0.05
     assert report["cop_strictly_inside_fraction"] > 0.9
     assert report["simulated_s"] == pytest.approx(0.5)
     assert json.loads((tmp_path / "report.json").read_text())[0]["scenario"] == "stand"
