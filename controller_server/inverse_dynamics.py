@@ -98,7 +98,7 @@ def solve_inverse_dynamics(
     torque_limit: np.ndarray,
     *,
     measured_wrenches: np.ndarray | None = None,
-    force_regularization: float = 1e-6,
+    force_regularization: float = 1e-4,
     support_weight: float = 100.0,
     qp_solver: str = "daqp",
 ) -> InverseDynamicsResult:

@@ -17,9 +17,10 @@ from clients.sim.scenario import PushSpec, Scenario, load_scenario
 
 __all__ = ["ABLATIONS", "run_scenarios", "server_endpoint", "sweep_push"]
 
+ANGULAR_OFF: dict[str, Any] = {"angular_momentum_gain": 0.0, "weight_angular_momentum": 0.0}
 ABLATIONS: dict[str, dict[str, Any]] = {
-    "tracking only": {"weight_linear_momentum": 0.0, "angular_momentum_gain": 0.0},
-    "+ linear momentum": {"angular_momentum_gain": 0.0},
+    "tracking only": {"weight_linear_momentum": 0.0, **ANGULAR_OFF},
+    "+ linear momentum": ANGULAR_OFF,
     "+ linear and angular momentum": {},
 }
 """Thesis ch. 7.1 ablations of the momentum controller, as parameter overrides."""

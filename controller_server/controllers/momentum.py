@@ -146,6 +146,15 @@ class MomentumController(Controller):
         "angular_momentum_gain": ParamSpec(
             10.0, minimum=0.0, maximum=1e6, doc="γ of eq. 5.17 (1/m)"
         ),
+        "angular_momentum_damping": ParamSpec(
+            10.0,
+            minimum=0.0,
+            maximum=1e4,
+            doc="k_H: Ḣ_des = −k_H H instead of eq. 5.15's Ḣ_des = 0 (1/s)",
+        ),
+        "weight_angular_momentum": ParamSpec(
+            10.0, minimum=0.0, maximum=1e6, doc="β_0 added to eq. 5.17's β_ba = γ ‖p − g‖ (1)"
+        ),
         "ground_force_mode": ParamSpec(
             "distributed",
             kind="choice",
@@ -173,7 +182,7 @@ class MomentumController(Controller):
             doc="B of the damped constraint solve: ‖Δq̈‖_M ≤ B ‖J_sup q̈ + J̇ q̇‖",
         ),
         "force_regularization": ParamSpec(
-            1e-6,
+            1e-4,
             minimum=1e-12,
             maximum=1.0,
             doc="ε on ‖f‖² when q̈ cannot be realized exactly (1/kg)",
@@ -417,9 +426,15 @@ class MomentumController(Controller):
                 )
             )
         cop, cmp_ = self._ground_points(terms, wrenches, flags)
-        angular_weight = angular_momentum_weight(p["angular_momentum_gain"], cop, cmp_)
+        angular_weight = angular_momentum_weight(
+            p["angular_momentum_gain"], cop, cmp_, p["weight_angular_momentum"]
+        )
         if angular_weight > 0:
-            objectives.append(compute_angular_momentum_objective(momentum, mass, angular_weight))
+            objectives.append(
+                compute_angular_momentum_objective(
+                    momentum, mass, angular_weight, p["angular_momentum_damping"]
+                )
+            )
         for name, target in self._points.items():
             point = point_kinematics(
                 model, self._data, model.getFrameId(target.frame), target.offset_in_frame[None, :]
@@ -439,6 +454,8 @@ class MomentumController(Controller):
             "objectives": objectives,
             "linear_momentum_rate_desired": desired_rate,
             "angular_momentum_weight": angular_weight,
+            "angular_momentum_rate_desired": -p["angular_momentum_damping"]
+            * momentum.angular_momentum,
         }
 
     def _ground_points(
@@ -483,7 +500,7 @@ class MomentumController(Controller):
             "angular_momentum": momentum.angular_momentum,
             "linear_momentum_rate_desired": self._last_optimizer["linear_momentum_rate_desired"],
             "linear_momentum_rate_achieved": momentum.R @ acceleration + momentum.r_bias,
-            "angular_momentum_rate_desired": np.zeros(3),
+            "angular_momentum_rate_desired": self._last_optimizer["angular_momentum_rate_desired"],
             "angular_momentum_rate_achieved": momentum.S @ acceleration + momentum.s_bias,
             "center_of_pressure": cop,
             "centroidal_moment_pivot": cmp_,
@@ -511,5 +528,8 @@ class TrackingController(MomentumController):
         ),
         "angular_momentum_gain": ParamSpec(
             0.0, minimum=0.0, maximum=1e6, doc="γ of eq. 5.17 (off in the baseline)"
+        ),
+        "weight_angular_momentum": ParamSpec(
+            0.0, minimum=0.0, maximum=1e6, doc="β_0 of the angular objective (off in the baseline)"
         ),
     }

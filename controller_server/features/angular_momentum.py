@@ -10,6 +10,13 @@ with ``p`` the centre of pressure (eq. 3.3–3.6) and ``g`` the centroidal
 moment pivot (eq. 3.9–3.10): the farther apart they are, the more the ground
 is changing the angular momentum, and the harder the objective holds it.
 Rows are divided by ``m_T`` like the linear objective's.
+
+Extension (off by default, thesis values): ``Ḣ_des = −k_H H`` damps the
+angular momentum instead of holding it, and a floor ``β_0`` on the weight
+keeps the objective alive when the COP and CMP coincide (``β_ba = β_0 +
+γ ‖p − g‖``). A push above the CM leaves the body pitching; holding that
+angular momentum (eq. 5.15) keeps it pitching, damping it brings it to rest
+(the centroidal momentum control of Lee & Goswami 2012).
 """
 
 from __future__ import annotations
@@ -23,20 +30,24 @@ __all__ = ["angular_momentum_weight", "compute_angular_momentum_objective"]
 
 
 def angular_momentum_weight(
-    gain: float, center_of_pressure: np.ndarray, centroidal_moment_pivot: np.ndarray
+    gain: float,
+    center_of_pressure: np.ndarray,
+    centroidal_moment_pivot: np.ndarray,
+    floor: float = 0.0,
 ) -> float:
-    """``β_ba = γ ‖p − g‖`` (eq. 5.17); zero when either point is undefined (no ground force)."""
+    """``β_ba = β_0 + γ ‖p − g‖`` (eq. 5.17, ``β_0 = 0``); ``β_0`` alone without ground force."""
     distance = np.linalg.norm((center_of_pressure - centroidal_moment_pivot)[:2])
-    return float(gain * distance) if np.isfinite(distance) else 0.0
+    return floor + (float(gain * distance) if np.isfinite(distance) else 0.0)
 
 
 def compute_angular_momentum_objective(
-    momentum: MomentumRates, total_mass: float, weight: float
+    momentum: MomentumRates, total_mass: float, weight: float, damping: float = 0.0
 ) -> Objective:
-    """Rows ``S / m_T`` toward ``Ḣ_des = 0`` (eq. 5.16) with weight β_ba."""
+    """Rows ``S / m_T`` toward ``Ḣ_des = −k_H H`` (eq. 5.16; ``k_H = 0``: eq. 5.15), weight β_ba."""
+    desired_rate = -damping * momentum.angular_momentum
     return Objective(
         "angular_momentum",
         momentum.S / total_mass,
-        -momentum.s_bias / total_mass,
+        (desired_rate - momentum.s_bias) / total_mass,
         np.full(3, weight),
     )

@@ -106,7 +106,33 @@ def test_standing_still_needs_no_correction():
     np.testing.assert_allclose(
         d["centroidal_moment_pivot"][:2], d["position_com_in_world"][:2], atol=1e-6
     )
-    assert d["angular_momentum_weight"] == pytest.approx(0.0, abs=1e-4)
+    # β_ba = β_0 + γ ‖p − g‖ with p = g: only the floor β_0 remains.
+    assert d["angular_momentum_weight"] == pytest.approx(
+        controller.parameters()["weight_angular_momentum"], abs=1e-4
+    )
+    np.testing.assert_allclose(d["angular_momentum_rate_desired"], 0.0, atol=1e-12)
+
+
+def test_angular_momentum_is_damped_toward_zero():
+    """Ḣ_des = −k_H H: a body spinning about the CM is driven back to rest (extension of
+    eq. 5.15), and the optimizer's achieved Ḣ opposes H."""
+    robot = load_robot_model("thesis_humanoid")
+    q = pin.neutral(robot.model)
+    q[:3] = robot.standing_position_base_in_world
+    v = np.zeros(robot.model.nv)
+    v[4] = 0.5  # the whole body pitching at 0.5 rad/s about the base's y axis
+    controller = MomentumController(
+        robot, {"angular_momentum_damping": 8.0, "weight_angular_momentum": 100.0}
+    )
+    d = controller.compute(ControlInput(0.0, q, v, (False, False))).diagnostics
+    momentum = d["angular_momentum"]
+    assert abs(momentum[1]) > 1.0
+    np.testing.assert_allclose(d["angular_momentum_rate_desired"], -8.0 * momentum, rtol=1e-12)
+    # In flight only gravity acts, so Ḣ about the CM is zero whatever the joints do
+    # (the optimizer cannot change it); on the ground the feet can.
+    d = controller.compute(ControlInput(0.0, q, v, (True, True))).diagnostics
+    achieved = d["angular_momentum_rate_achieved"]
+    assert achieved[1] * momentum[1] < 0.0, (achieved, momentum)
 
 
 def test_linear_momentum_objective_pulls_the_cm_toward_c_des():
