@@ -100,17 +100,24 @@ def shrink_polygon(polygon_xy: np.ndarray, margin: float) -> np.ndarray:
     """
     polygon_xy = np.asarray(polygon_xy, dtype=float).reshape(-1, 2)
     centre = polygon_xy.mean(axis=0, keepdims=True) if len(polygon_xy) else np.zeros((1, 2))
+    # Vertices closer than 1 nm to the next give no edge direction: drop them.
+    gaps = np.linalg.norm(np.roll(polygon_xy, -1, axis=0) - polygon_xy, axis=1)
+    polygon_xy = polygon_xy[gaps > 1e-9]
     if len(polygon_xy) < 3 or margin <= 0.0:
         return polygon_xy if margin <= 0.0 else centre
     edges = np.roll(polygon_xy, -1, axis=0) - polygon_xy
     normals = np.column_stack([edges[:, 1], -edges[:, 0]])  # outward for counter-clockwise
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     offsets = np.einsum("ij,ij->i", normals, polygon_xy) - margin
-    previous = np.roll(np.arange(len(polygon_xy)), 1)
-    shrunk = np.empty_like(polygon_xy)
-    for i, j in enumerate(previous):
-        lines = np.vstack([normals[j], normals[i]])
-        shrunk[i] = np.linalg.solve(lines, [offsets[j], offsets[i]])
+    # Vertex i: where the offset edges i − 1 and i meet, n_j · p = o_j (Cramer's rule).
+    n_prev, o_prev = np.roll(normals, 1, axis=0), np.roll(offsets, 1)
+    determinant = n_prev[:, 0] * normals[:, 1] - n_prev[:, 1] * normals[:, 0]
+    shrunk = np.column_stack(
+        [
+            (o_prev * normals[:, 1] - n_prev[:, 1] * offsets) / determinant,
+            (n_prev[:, 0] * offsets - o_prev * normals[:, 0]) / determinant,
+        ]
+    )
     # Too much margin turns the offset polygon inside out.
     shrunk_edges = np.roll(shrunk, -1, axis=0) - shrunk
     if np.any(np.einsum("ij,ij->i", shrunk_edges, edges) <= 0.0):

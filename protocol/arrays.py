@@ -25,7 +25,9 @@ def array_to_bytes(array: np.ndarray) -> bytes:
 
 
 def _parse(value: Any, *, length: int | None, finite: bool) -> np.ndarray:
-    if isinstance(value, bytes | bytearray | memoryview):
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1:
+        array = value.copy()  # the common case in code: no conversion, no shape checks
+    elif isinstance(value, bytes | bytearray | memoryview):
         raw = bytes(value)
         if len(raw) % WIRE_DTYPE.itemsize:
             raise PydanticCustomError(
@@ -55,7 +57,7 @@ def _parse(value: Any, *, length: int | None, finite: bool) -> np.ndarray:
             "expected {expected} values, got {actual}",
             {"expected": length, "actual": array.size},
         )
-    if finite and not np.all(np.isfinite(array)):
+    if finite and not np.isfinite(array).all():
         raise PydanticCustomError(
             "non_finite",
             "values must be finite, got NaN/inf at index {index}",

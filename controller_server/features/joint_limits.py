@@ -103,10 +103,10 @@ class BallJointLimit:
 
     def _within(self, quaternion: np.ndarray) -> bool:
         """Cheap test that both errors are zero (the common case), in scalar arithmetic."""
-        x, y, z, w = (float(c) for c in quaternion)
+        x, y, z, w = quaternion.tolist()
         norm = math.sqrt(x * x + y * y + z * z + w * w)
         x, y, z, w = x / norm, y / norm, z / norm, w / norm
-        ax, ay, az = (float(c) for c in self.bone_axis_in_parent)
+        ax, ay, az = self.bone_axis_in_parent.tolist()
         # a' = a + w t + u × t with t = 2 u × a (rotation of the bone axis).
         tx, ty, tz = 2 * (y * az - z * ay), 2 * (z * ax - x * az), 2 * (x * ay - y * ax)
         bone = np.array(
@@ -125,7 +125,9 @@ class BallJointLimit:
             if twist <= -math.pi
             else twist
         )
-        return self.twist_lower_rad <= twist <= self.twist_upper_rad and self.cone.contains(bone)
+        return self.twist_lower_rad <= twist <= self.twist_upper_rad and self.cone.contains_unit(
+            bone
+        )
 
 
 @dataclass(frozen=True)

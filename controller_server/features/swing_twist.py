@@ -208,10 +208,13 @@ class SwingCone:
 
     def contains(self, direction: np.ndarray) -> bool:
         """Whether the bone direction ``a'`` is allowed (``a' · n_i ≤ 0``, Macchietto 2008 §6.2)."""
-        d = _unit(direction, 3, "direction")
+        return self.contains_unit(_unit(direction, 3, "direction"))
+
+    def contains_unit(self, unit_direction: np.ndarray) -> bool:
+        """:meth:`contains` for a direction already known to be a unit 3-vector (no checks)."""
         if not len(self.face_normals_in_parent):
             return True
-        projections = self.face_normals_in_parent @ d
+        projections = self.face_normals_in_parent @ unit_direction
         if self.reflex:
             return bool(projections.min() <= _TINY)
         return bool(projections.max() <= _TINY)

@@ -23,7 +23,7 @@ import os
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 from pathlib import Path
 
 import numpy as np
@@ -128,6 +128,19 @@ class RobotModel:
     def num_contact_points(self) -> int:
         """Number of contact points over all contacts."""
         return sum(len(c.points_in_frame) for c in self.contacts)
+
+    @cached_property
+    def ball_quaternion_starts(self) -> np.ndarray:
+        """Index in ``joint_position`` (wire) of each ball joint's quaternion ``[x, y, z, w]``."""
+        model = self.model
+        return np.array(
+            [
+                model.idx_qs[model.getJointId(joint.name)] - 7
+                for joint in self.joints
+                if joint.kind == "ball"
+            ],
+            dtype=int,
+        )
 
 
 def _mjcf_torque_limits(root: ET.Element, model: pin.Model) -> np.ndarray:

@@ -167,3 +167,25 @@ def test_controller_failure_is_internal_error_and_session_survives(server, monke
     state = random_state(welcome, np.random.default_rng(4))
     assert_error(ask(server, ALICE, state), ErrorCode.INTERNAL)
     assert isinstance(ask(server, ALICE, state), Command)
+
+
+@pytest.mark.parametrize("field", ["joint_torque", "joint_acceleration", "contact_force_in_world"])
+def test_non_finite_controller_output_never_leaves_the_server(server, monkeypatch, field):
+    """A NaN the controller produces is an INTERNAL error naming the field, not a command."""
+    welcome = hello(server)
+    controller = server.sessions[ALICE].controller
+    original = controller.compute
+
+    def poisoned(control_input):
+        output = original(control_input)
+        array = {
+            "joint_torque": output.joint_torque,
+            "joint_acceleration": output.acceleration[6:],
+            "contact_force_in_world": output.contact_force_in_world.reshape(-1),
+        }[field]
+        array[len(array) // 2] = np.nan
+        return output
+
+    monkeypatch.setattr(controller, "compute", poisoned)
+    state = random_state(welcome, np.random.default_rng(5))
+    assert_error(ask(server, ALICE, state), ErrorCode.INTERNAL, field=field, seq=state.seq)

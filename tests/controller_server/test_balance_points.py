@@ -1,0 +1,88 @@
+"""Support polygon geometry and the COP-admissible linear momentum rate."""
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from controller_server.balance_points import (
+    closest_point_in_polygon,
+    shrink_polygon,
+    support_polygon,
+)
+from controller_server.features import admissible_linear_momentum_rate
+
+SQUARE = np.array([[0.1, -0.1], [0.1, 0.1], [-0.1, 0.1], [-0.1, -0.1]])  # counter-clockwise
+GRAVITY = 9.81
+
+
+def distance_to_boundary(point: np.ndarray, polygon: np.ndarray) -> float:
+    starts, ends = polygon, np.roll(polygon, -1, axis=0)
+    segments = ends - starts
+    t = np.clip(np.einsum("ij,ij->i", point - starts, segments) / (segments**2).sum(1), 0, 1)
+    return float(np.linalg.norm(starts + t[:, None] * segments - point, axis=1).min())
+
+
+def inside(point: np.ndarray, polygon: np.ndarray, tolerance: float = 1e-12) -> bool:
+    edges = np.roll(polygon, -1, axis=0) - polygon
+    cross = edges[:, 0] * (point[1] - polygon[:, 1]) - edges[:, 1] * (point[0] - polygon[:, 0])
+    return bool(np.all(cross >= -tolerance))
+
+
+def test_shrinking_a_square_moves_every_edge_in_by_the_margin():
+    shrunk = shrink_polygon(SQUARE, 0.02)
+    np.testing.assert_allclose(shrunk, SQUARE * 0.8, atol=1e-15)
+
+
+def test_a_margin_larger_than_the_polygon_collapses_it_to_its_centre():
+    np.testing.assert_allclose(shrink_polygon(SQUARE + 1.0, 0.2), [[1.0, 1.0]])
+
+
+polygons = st.lists(
+    st.tuples(st.floats(-0.3, 0.3), st.floats(-0.3, 0.3)), min_size=3, max_size=12
+).map(lambda points: support_polygon(np.column_stack([np.array(points), np.zeros(len(points))])))
+
+
+@settings(max_examples=200, deadline=None)
+@given(polygons, st.floats(0.0, 0.05), st.tuples(st.floats(-0.6, 0.6), st.floats(-0.6, 0.6)))
+def test_shrunk_polygon_and_closest_point_properties(polygon, margin, point):
+    area = 0.5 * np.sum(
+        polygon[:, 0] * np.roll(polygon[:, 1], -1) - np.roll(polygon[:, 0], -1) * polygon[:, 1]
+    )
+    assume(len(polygon) >= 3 and area > 1e-4)  # real feet, not slivers
+    point = np.array(point)
+    shrunk = shrink_polygon(polygon, margin)
+    if len(shrunk) >= 3:
+        # Every shrunk vertex is inside the original, exactly `margin` from its nearest edge.
+        for vertex in shrunk:
+            assert inside(vertex, polygon, 1e-12)
+            assert distance_to_boundary(vertex, polygon) >= margin - 1e-9
+    closest = closest_point_in_polygon(point, polygon)
+    if inside(point, polygon, 0.0):
+        np.testing.assert_array_equal(closest, point)
+    else:
+        # On the boundary, and no boundary point is nearer.
+        assert distance_to_boundary(closest, polygon) < 1e-12
+        assert np.linalg.norm(closest - point) <= distance_to_boundary(point, polygon) + 1e-12
+
+
+@pytest.mark.parametrize(
+    ("desired_xy", "expected_cop_xy"),
+    [
+        ((-5.0, 0.0), (0.06 + 0.94 * 5.0 / (65.0 * GRAVITY), 0.0)),  # admissible: unchanged
+        ((-2000.0, 0.0), (0.08, 0.0)),  # COP would leave the front edge: held at the margin
+        ((3000.0, -3000.0), (-0.08, 0.08)),  # and at a corner
+    ],
+)
+def test_admissible_rate_keeps_the_cop_it_needs_inside_the_shrunk_polygon(
+    desired_xy, expected_cop_xy
+):
+    """p = c − (c_z − h) L̇ / (m g) (angular momentum held) must lie in the polygon."""
+    mass, com = 65.0, np.array([0.06, 0.0, 0.94])
+    desired = np.array([*desired_xy, np.nan])
+    admissible = admissible_linear_momentum_rate(
+        desired, mass, com, shrink_polygon(SQUARE, 0.02), 0.0, GRAVITY
+    )
+    cop = com[:2] - com[2] * admissible[:2] / (mass * GRAVITY)
+    np.testing.assert_allclose(cop, expected_cop_xy, atol=1e-12)
+    assert np.isnan(admissible[2])
