@@ -9,7 +9,8 @@ every contact (the thesis' penalty forces, or force sensors) and ``τ``
 compensates it, as in the thesis. *Distributed*: the six root rows have no
 actuator, so the contact forces ``f`` of the supporting feet must balance
 them, within linearized (pyramid) friction cones on a flat ground of normal
-+z (``f_z ≥ 0``, ``|f_x|, |f_y| ≤ μ f_z`` at every support point).
++z (``f_z ≥ 0``, ``|f_x|, |f_y| ≤ μ f_z / √2`` at every support point: the
+pyramid inscribed in Coulomb's cone).
 
 The common case is exact and needs no solver: the smallest forces that
 balance the root, ``f = Gᵀ (G Gᵀ)⁻¹ w``, lie in the cones and the torques
@@ -23,6 +24,7 @@ the command is always dynamically consistent.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
@@ -71,7 +73,11 @@ class InverseDynamicsResult:
 def friction_pyramid(friction_coefficients: Sequence[float]) -> np.ndarray:
     """Rows ``G`` of ``G f ≤ 0`` for point forces ``f = [f_x, f_y, f_z]`` per point.
 
-    Five rows per point: ``±f_x − μ f_z ≤ 0``, ``±f_y − μ f_z ≤ 0``, ``−f_z ≤ 0``.
+    Five rows per point: ``±f_x − μ' f_z ≤ 0``, ``±f_y − μ' f_z ≤ 0``, ``−f_z ≤ 0``
+    with ``μ' = μ/√2``: the pyramid inscribed in Coulomb's circular cone
+    ``‖f_t‖ ≤ μ f_z``, so every force it admits can really be transmitted
+    (the circumscribed one, ``μ' = μ``, admits diagonal forces 41 % beyond
+    the cone: on ice, μ = 0.03, that is enough to slide the stance foot).
     Built once per set of coefficients (the supports change rarely); the
     caller gets a copy, since some solvers want writeable inputs.
     """
@@ -82,7 +88,8 @@ def friction_pyramid(friction_coefficients: Sequence[float]) -> np.ndarray:
 def _friction_pyramid(friction_coefficients: tuple[float, ...]) -> np.ndarray:
     count = len(friction_coefficients)
     rows = np.zeros((5 * count, 3 * count))
-    for i, mu in enumerate(friction_coefficients):
+    for i, mu_circular in enumerate(friction_coefficients):
+        mu = mu_circular / math.sqrt(2.0)
         block = np.array(
             [[1, 0, -mu], [-1, 0, -mu], [0, 1, -mu], [0, -1, -mu], [0, 0, -1]], dtype=float
         )

@@ -2,7 +2,8 @@
 
 Every control tick the runner reads the backend's state, sends it to the
 server (``state``), and applies the returned torques for the physics steps
-until the next tick (zero-order hold). In ``measured`` ground-force mode it
+until the next tick (zero-order hold); the scenario's parameter changes go
+out as ``set_params`` at their tick. In ``measured`` ground-force mode it
 also sends the backend's contact wrenches (the thesis' penalty forces). The
 run stops early once the robot has fallen.
 """
@@ -22,7 +23,14 @@ from clients.sim.scenario import Scenario
 from clients.state import RobotState
 from protocol.messages import Command, Welcome
 
-__all__ = ["FALL_TILT_RAD", "RunRecord", "make_backend", "run_scenario", "standing_state"]
+__all__ = [
+    "FALL_TILT_RAD",
+    "RunRecord",
+    "make_backend",
+    "run_scenario",
+    "standing_state",
+    "support_flags",
+]
 
 FALL_TILT_RAD = np.radians(60.0)
 """Base tilt from upright beyond which the robot has fallen."""
@@ -109,6 +117,24 @@ def _fall_reason(state: RobotState, standing_height_m: float, non_foot_contact: 
     return ""
 
 
+def support_flags(
+    supporting: list[bool], touching: list[bool], normal_force_N: np.ndarray, threshold_N: float
+) -> list[bool]:
+    """Which feet the client reports as supports (``contact_flags``).
+
+    A foot that merely touches is not yet a support: a foot set down lightly
+    carries no load, and a controller that plans its share of the weight on
+    it (and holds it still, eq. 5.1) lets the body drop onto it. So a touching
+    foot becomes a support once its normal force exceeds ``threshold_N``, and
+    stays one until it lifts off (hysteresis, like a force-sensor threshold on
+    hardware).
+    """
+    return [
+        bool(touch and (support or force > threshold_N))
+        for support, touch, force in zip(supporting, touching, normal_force_N, strict=True)
+    ]
+
+
 def run_scenario(
     scenario: Scenario, endpoint: str, progress: Any = None, timeout_s: float = 10.0
 ) -> RunRecord:
@@ -135,11 +161,21 @@ def run_scenario(
         record = RunRecord(scenario, welcome)
         ticks = round(scenario.duration_s * scenario.control_rate_hz)
         steps = scenario.physics_steps_per_control_tick
+        changes = list(scenario.param_changes)
+        flags = backend.contact_flags()  # at rest on the ground: every touching foot supports
         start = time.perf_counter()
         for tick in range(ticks):
+            while changes and changes[0].time_s <= backend.time_s + 1e-9:
+                client.set_params(changes.pop(0).params)
             state = backend.state()
-            flags = backend.contact_flags()
-            wrenches = backend.contact_wrenches_in_world() if measured else None
+            all_wrenches = backend.contact_wrenches_in_world()
+            flags = support_flags(
+                flags,
+                backend.contact_flags(),
+                all_wrenches[:, 2],
+                scenario.support_force_threshold_N,
+            )
+            wrenches = all_wrenches if measured else None
             command = client.step(state.to_message(backend.time_s, flags, wrenches))
             record.time_s.append(tick / scenario.control_rate_hz)
             record.states.append(state)

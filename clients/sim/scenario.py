@@ -2,7 +2,9 @@
 
 A scenario is a TOML file naming the model, the controller and its
 parameters, the backend, friction, duration, control and physics rates,
-the initial pose and the pushes. Built-in scenarios (thesis ch. 7) live in
+the initial pose, the pushes and timed parameter changes (a motion clip
+starting, a weight shift, a foot leaving the supports, point targets
+dragged). Built-in scenarios (thesis ch. 7) live in
 ``clients/sim/scenarios/`` and load by name.
 """
 
@@ -16,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from clients.sim.backend import Push
 
-__all__ = ["SCENARIO_DIR", "PushSpec", "Scenario", "load_scenario"]
+__all__ = ["SCENARIO_DIR", "ParamChange", "PushSpec", "Scenario", "load_scenario"]
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 
@@ -41,6 +43,15 @@ class PushSpec(BaseModel):
         )
 
 
+class ParamChange(BaseModel):
+    """Controller parameters sent (``set_params``) at the first control tick at or after a time."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    time_s: float = Field(ge=0.0, description="When (s of simulated time).")
+    params: dict[str, Any] = Field(description="Parameters to set, as in `set_params`.")
+
+
 class Scenario(BaseModel):
     """One simulated run."""
 
@@ -57,10 +68,19 @@ class Scenario(BaseModel):
     control_rate_hz: float = Field(default=1000.0, gt=0.0, le=10_000.0)
     physics_rate_hz: float = Field(default=1000.0, gt=0.0, le=100_000.0)
     ground_force_mode: Literal["distributed", "measured"] = Field(default="distributed")
+    support_force_threshold_N: float = Field(
+        default=20.0,
+        ge=0.0,
+        description="A touching foot becomes a support once its normal force exceeds this (N); "
+        "it stays one until it lifts off.",
+    )
     initial_joint_position: dict[str, list[float]] = Field(
         default_factory=dict, description="Joint name → position (rad; ball: xyzw) at t = 0."
     )
     pushes: list[PushSpec] = Field(default_factory=list)
+    param_changes: list[ParamChange] = Field(
+        default_factory=list, description="Run-time parameter changes, in time order."
+    )
 
     @model_validator(mode="after")
     def _rates(self) -> Scenario:
@@ -70,6 +90,13 @@ class Scenario(BaseModel):
                 f"physics_rate_hz ({self.physics_rate_hz}) must be a whole multiple of "
                 f"control_rate_hz ({self.control_rate_hz})"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _changes_in_order(self) -> Scenario:
+        times = [change.time_s for change in self.param_changes]
+        if times != sorted(times):
+            raise ValueError(f"param_changes must be in time order, got times {times}")
         return self
 
     @property

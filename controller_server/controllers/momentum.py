@@ -162,6 +162,21 @@ class MomentumController(Controller):
             doc="inverse dynamics with distributed forces, or the state's measured wrenches",
         ),
         "ground_height": ParamSpec(0.0, minimum=-1e3, maximum=1e3, doc="ground plane z (m)"),
+        "friction_coefficients": ParamSpec(
+            None,
+            kind="vector",
+            minimum=0.0,
+            maximum=10.0,
+            doc="Coulomb μ per contact (welcome order); default the model's contacts' μ",
+        ),
+        "support_mask": ParamSpec(
+            None,
+            kind="vector",
+            minimum=0.0,
+            maximum=1.0,
+            doc="per contact (welcome order), 0 = never a support even when touching "
+            "(lift a foot: single-support motions); default all 1",
+        ),
         "optimizer_period_ticks": ParamSpec(
             1,
             kind="int",
@@ -221,6 +236,10 @@ class MomentumController(Controller):
             return pin.neutral(self.robot.model)[7:]
         if key == "joint_weights":
             return np.ones(self.robot.nv_joints)
+        if key == "support_mask":
+            return np.ones(len(self.robot.contacts))
+        if key == "friction_coefficients":
+            return np.array([c.friction_coefficient for c in self.robot.contacts])
         return super().default_value(key)
 
     def parameters(self) -> dict[str, Any]:
@@ -315,7 +334,10 @@ class MomentumController(Controller):
             raise InvalidParams(
                 "contact_wrench_in_world", "required in ground_force_mode 'measured'"
             )
-        flags = control_input.contact_flags
+        flags = tuple(
+            bool(on and allowed > 0.5)
+            for on, allowed in zip(control_input.contact_flags, p["support_mask"], strict=True)
+        )
         run_optimizer = (
             self._last_solution is None
             or flags != self._last_flags
@@ -324,14 +346,14 @@ class MomentumController(Controller):
         self._ticks += 1
         if run_optimizer:
             wrenches = control_input.contact_wrench_in_world if measured else self._last_wrenches
-            self._optimize(control_input, terms, wrenches)
+            self._optimize(control_input, terms, wrenches, flags)
         solution = self._last_solution
         assert solution is not None
         dynamics = solve_inverse_dynamics(
             terms,
             solution.x,
             flags,
-            [c.friction_coefficient for c in self.robot.contacts],
+            list(p["friction_coefficients"]),
             self.robot.torque_limit,
             measured_wrenches=control_input.contact_wrench_in_world if measured else None,
             force_regularization=p["force_regularization"],
@@ -366,10 +388,14 @@ class MomentumController(Controller):
         return q_ref, v_ref, a_ref
 
     def _optimize(
-        self, control_input: ControlInput, terms: DynamicsTerms, wrenches: np.ndarray | None
+        self,
+        control_input: ControlInput,
+        terms: DynamicsTerms,
+        wrenches: np.ndarray | None,
+        flags: tuple[bool, ...],
     ) -> None:
         p, model = self._params, self.robot.model
-        q, v, flags = control_input.q, control_input.v, control_input.contact_flags
+        q, v = control_input.q, control_input.v
         q_ref, v_ref, a_ref = self._reference(control_input)
         errors = joint_limit_errors(self._limits, q, model.nv)
         stiffness, damping = soft_limit_gains(
@@ -419,6 +445,9 @@ class MomentumController(Controller):
                 shrink_polygon(support_polygon(np.vstack(supporting)), p["cop_margin"]),
                 p["ground_height"],
                 float(np.linalg.norm(model.gravity.linear)),
+                friction_coefficient=min(
+                    mu for mu, on in zip(p["friction_coefficients"], flags, strict=True) if on
+                ),
             )
             objectives.append(
                 compute_linear_momentum_objective(

@@ -22,6 +22,8 @@ projection in the COP plane).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from controller_server.balance_points import closest_point_in_polygon
@@ -63,8 +65,13 @@ def admissible_linear_momentum_rate(
     admissible_cop_polygon_xy: np.ndarray,
     ground_height: float,
     gravity: float = 9.81,
+    friction_coefficient: float = math.inf,
 ) -> np.ndarray:
-    """``L̇_des`` with its horizontal part limited so the COP it needs is in the polygon.
+    """``L̇_des`` with its horizontal part limited so the ground can push it.
+
+    The COP it needs must be in the polygon, and the horizontal force it needs
+    within friction, ``‖L̇_xy‖ ≤ μ m_T g`` (thesis ch. 7.3: on ice the CM may
+    only be steered as fast as the feet can grip).
 
     Args:
         desired_rate: ``L̇_des`` (N), z ignored and returned unchanged.
@@ -74,6 +81,7 @@ def admissible_linear_momentum_rate(
             the COP may go (the support polygon shrunk by a margin), m ≥ 1.
         ground_height: Ground plane height ``h`` (m).
         gravity: ``g`` (m/s²).
+        friction_coefficient: Smallest μ of the supports.
     """
     lever = (position_com_in_world[2] - ground_height) / (total_mass * gravity)
     if lever <= 0.0 or len(admissible_cop_polygon_xy) == 0:
@@ -83,6 +91,10 @@ def admissible_linear_momentum_rate(
     admissible = desired_rate.copy()
     cop_admissible = closest_point_in_polygon(cop, admissible_cop_polygon_xy)
     admissible[HORIZONTAL] = (com_xy - cop_admissible) / lever
+    horizontal = float(np.linalg.norm(admissible[HORIZONTAL]))
+    grip = friction_coefficient * total_mass * gravity
+    if horizontal > grip:
+        admissible[HORIZONTAL] *= grip / horizontal
     return admissible
 
 

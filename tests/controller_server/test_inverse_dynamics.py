@@ -97,8 +97,8 @@ def assert_forces_admissible(
     # The QP solver's feasibility tolerance is relative: -1e-9 N per N of the largest force.
     scale_N = max(1.0, float(np.max(np.abs(contact_force_in_world))))
     assert np.all(fz >= -1e-9 * scale_N), fz
-    assert np.all(np.abs(fx) <= mu * fz + 1e-6), (fx, fz)
-    assert np.all(np.abs(fy) <= mu * fz + 1e-6), (fy, fz)
+    # Inside Coulomb's circular cone, not just a pyramid around it.
+    assert np.all(np.hypot(fx, fy) <= mu * fz + 1e-6), (fx, fy, fz)
     off = ~point_support_mask(robot, flags)
     np.testing.assert_array_equal(contact_force_in_world[off], 0.0)
 
