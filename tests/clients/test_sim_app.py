@@ -8,6 +8,7 @@ from pydantic import ValidationError
 
 from clients.sim.app import run_scenarios
 from clients.sim.metrics import strictly_inside
+from clients.sim.runner import support_flags
 from clients.sim.scenario import SCENARIO_DIR, Scenario, load_scenario
 
 pytestmark = pytest.mark.e2e
@@ -55,3 +56,26 @@ def test_quiet_standing_in_mujoco_stays_up_with_report_and_plot(server, tmp_path
     assert json.loads((tmp_path / "report.json").read_text())[0]["scenario"] == "stand"
     png = (tmp_path / "stand.png").read_bytes()
     assert png.startswith(b"\x89PNG") and len(png) > 10_000
+
+
+def test_param_changes_must_be_in_time_order():
+    with pytest.raises(ValidationError, match="time order"):
+        Scenario(
+            name="x",
+            param_changes=[{"time_s": 2.0, "params": {}}, {"time_s": 1.0, "params": {}}],
+        )
+
+
+def test_a_touching_foot_supports_once_loaded_until_it_lifts_off():
+    threshold_N = 20.0
+    flags = [True, False]
+    # The left foot stays a support while touching, however light; the right foot
+    # touches but carries 5 N: not yet a support.
+    flags = support_flags(flags, [True, True], np.array([3.0, 5.0]), threshold_N)
+    assert flags == [True, False]
+    flags = support_flags(flags, [True, True], np.array([3.0, 25.0]), threshold_N)
+    assert flags == [True, True]
+    flags = support_flags(flags, [False, True], np.array([0.0, 600.0]), threshold_N)
+    assert flags == [False, True]
+    flags = support_flags(flags, [True, True], np.array([10.0, 600.0]), threshold_N)
+    assert flags == [False, True]

@@ -5,6 +5,7 @@ import pinocchio as pin
 import pytest
 
 from controller_server.controllers import ControlInput, MomentumController
+from controller_server.errors import InvalidParams
 from controller_server.features import load_motion_clip
 from controller_server.models import BUILTIN_MODELS, load_robot_model
 from controller_server.session import Session
@@ -277,3 +278,23 @@ def test_measured_mode_compensates_the_clients_wrenches():
     with pytest.raises(ProtocolError) as info:
         session.step(without)
     assert info.value.field == "contact_wrench_in_world"
+
+
+def test_support_mask_and_friction_coefficients_shape_the_contact_forces():
+    """A masked foot gets no force even when touching; forces stay in the set μ's cones."""
+    robot = load_robot_model("thesis_humanoid")
+    q = pin.neutral(robot.model)
+    q[:3] = robot.standing_position_base_in_world
+    v = np.zeros(robot.model.nv)
+    controller = MomentumController(
+        robot, {"support_mask": [0.0, 1.0], "friction_coefficients": [0.05, 0.05]}
+    )
+    for _ in range(3):
+        output = controller.compute(ControlInput(0.0, q, v, (True, True)))
+    left, right = np.split(output.contact_force_in_world, 2)
+    assert not left.any()
+    assert right[:, 2].sum() > 0.5 * robot.total_mass * 9.81
+    # Inscribed pyramid of μ = 0.05: |f_t| ≤ μ f_z at every point.
+    assert np.all(np.hypot(right[:, 0], right[:, 1]) <= 0.05 * right[:, 2] + 1e-9)
+    with pytest.raises(InvalidParams):
+        controller.set_params({"support_mask": [1.0, 1.0, 1.0]})

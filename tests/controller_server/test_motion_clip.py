@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 
 from controller_server.errors import InvalidParams
 from controller_server.features import motion_clip
+from controller_server.features.clip_library import CLIP_KEYFRAMES, build_clip, keyframe_clip
 from controller_server.features.motion_clip import (
     CLIPS_DIR,
     ClipSample,
@@ -528,3 +529,34 @@ def test_clip_time_counts_from_the_first_frame(revolute, knee_clip):
     assert shifted.duration_s == pytest.approx(DURATION_S)
     assert np.array_equal(shifted.sample(0.0).q, knee_clip.configurations[0])
     assert_sample_close(shifted.sample(0.7321), knee_clip.sample(0.7321), atol=1e-9)
+
+
+def test_builtin_clips_are_what_the_clip_library_writes(thesis):
+    """The committed JSON files are the generator's output (`python -m ...clip_library`)."""
+    for name in ("stand_sway", *CLIP_KEYFRAMES):
+        committed = (CLIPS_DIR / f"{name}.json").read_text()
+        assert committed == build_clip(name, thesis).to_json(), name
+
+
+def test_single_support_clips_lean_over_the_right_foot_then_come_back(thesis):
+    """Mid-clip the CM is over the right foot; the clips start and end neutral, at rest."""
+    model, data = thesis.model, thesis.model.createData()
+    for name in ("leg_swing", "kicks", "leg_circle"):
+        clip = load_motion_clip(name, thesis)
+        q = clip.sample(clip.duration_s / 2).q.copy()
+        pin.framesForwardKinematics(model, data, q)
+        right_foot_y = data.oMf[model.getFrameId("right_foot")].translation[1]
+        com_y = pin.centerOfMass(model, data, q)[1]
+        assert abs(com_y - right_foot_y) < 0.02, (name, com_y, right_foot_y)
+        for t in (0.0, clip.duration_s):
+            sample = clip.sample(t)
+            np.testing.assert_allclose(sample.q[7:], pin.neutral(model)[7:], atol=1e-12)
+            # Eased keyframes start and end at rest; finite differences at 50 Hz leave O(h).
+            np.testing.assert_allclose(sample.v, 0.0, atol=0.05)
+
+
+def test_keyframes_must_name_ball_joints_in_increasing_time(thesis):
+    with pytest.raises(ValueError, match="increase"):
+        keyframe_clip(thesis, [(0.0, {}), (1.0, {}), (1.0, {})], "x")
+    with pytest.raises(ValueError, match="not ball joints"):
+        keyframe_clip(thesis, [(0.0, {}), (1.0, {"left_toe": (0.0, 0.1, 0.0)})], "x")
