@@ -253,13 +253,19 @@ class Diagnostics(_Strict):
     centroidal_moment_pivot: FloatArray = wire_field(
         "CMP (eq. 3.9–3.10); NaN without ground force.", shape="3", unit="m", frame="world"
     )
+    supports: list[bool] = wire_field(
+        "Contacts used as supports this tick: `contact_flags` and the `support_mask` parameter.",
+        shape="contacts",
+    )
     support_polygon_xy: FloatArray = wire_field(
         "Convex hull of the supporting contact points, counter-clockwise x, y pairs.",
         shape="2 × vertices",
         unit="m",
         frame="world",
     )
-    angular_momentum_weight: float = wire_field("β_ba = γ ‖p − g‖ used this tick (eq. 5.17).")
+    angular_momentum_weight: float = wire_field(
+        "β_ba = β_0 + γ ‖p − g‖ used this tick (eq. 5.17; β_0 = 0 in the thesis)."
+    )
     objective_residuals: dict[str, float] = wire_field(
         "Per objective, the weighted residual ‖W (A q̈ − b)‖ at the returned q̈."
     )

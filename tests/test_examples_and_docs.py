@@ -54,6 +54,17 @@ def test_cli_help_runs_and_is_in_the_readme(command):
         assert f"poise {command}" in (ROOT / "README.md").read_text()
 
 
+def test_readme_documents_every_scenario_key_and_builtin_scenario():
+    from clients.sim.scenario import SCENARIO_DIR, ParamChange, PushSpec, Scenario
+
+    readme = (ROOT / "README.md").read_text()
+    for model in (Scenario, PushSpec, ParamChange):
+        for key in model.model_fields:
+            assert f"`{key}`" in readme, key
+    for path in SCENARIO_DIR.glob("*.toml"):
+        assert f"`{path.stem}`" in readme, path.stem
+
+
 def test_parser_lists_every_subcommand():
     help_text = build_parser().format_help()
     assert "serve" in help_text and "demo" in help_text

@@ -74,12 +74,16 @@ def run_scenarios(
 
 
 def _print_table(reports: list[dict[str, Any]]) -> None:
-    print(f"{'scenario':<22}{'backend':<10}{'result':<16}{'CM exc. m':>10}{'COP in':>8}{'RTF':>7}")
+    print(
+        f"{'scenario':<24}{'backend':<10}{'result':<16}{'CM exc. m':>10}{'COP in':>8}"
+        f"{'slip mm':>9}{'RTF':>7}"
+    )
     for r in reports:
         result = f"fell {r['fall_time_s']:.2f} s" if r["fell"] else "stayed up"
         print(
-            f"{r['scenario']:<22}{r['backend']:<10}{result:<16}{r['com_excursion_m']:>10.3f}"
-            f"{r['cop_strictly_inside_fraction']:>8.0%}{r['real_time_factor']:>7.2f}"
+            f"{r['scenario']:<24}{r['backend']:<10}{result:<16}{r['com_excursion_m']:>10.3f}"
+            f"{r['cop_strictly_inside_fraction']:>8.0%}{r['foot_slip_m'] * 1e3:>9.1f}"
+            f"{r['real_time_factor']:>7.2f}"
         )
 
 

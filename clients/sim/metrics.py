@@ -5,9 +5,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from clients.layout import joint_slices
+from clients.sim.model_file import resolve_model_path
 from clients.sim.runner import RunRecord
 
 __all__ = ["JOINT_GROUPS", "compute_metrics", "strictly_inside"]
@@ -54,8 +56,46 @@ def _joint_errors_rad(record: RunRecord) -> dict[str, np.ndarray]:
     return {group: np.array(values) for group, values in errors.items()}
 
 
+def _foot_slip_and_rotation(record: RunRecord) -> tuple[float, float]:
+    """Largest slide (m) and turn (rad) of a sole frame while the controller supports on it.
+
+    Supports are the controller's (``diagnostics.supports``: contact flags and
+    ``support_mask``), so a swinging foot that brushes the ground is not
+    counted. Each stance is measured from the sole frame's pose at the tick
+    the foot became a support, from the simulated states (Pinocchio forward kinematics
+    of the scenario's MJCF): a planted foot neither slides nor rocks.
+    """
+    model = pin.buildModelFromMJCF(str(resolve_model_path(record.scenario.model)))
+    data = model.createData()
+    frames = [model.getFrameId(contact.frame) for contact in record.welcome.contacts]
+    anchors: list[pin.SE3 | None] = [None] * len(frames)
+    slip_m = rotation_rad = 0.0
+    supports = (
+        [command.diagnostics.supports for command in record.commands]
+        if record.commands
+        else record.contact_flags
+    )
+    for state, flags in zip(record.states, supports, strict=True):
+        base = [state.position_base_in_world, state.orientation_base_in_world_xyzw]
+        q = np.concatenate([*base, state.joint_position])
+        pin.framesForwardKinematics(model, data, q)
+        for index, (frame, on) in enumerate(zip(frames, flags, strict=True)):
+            if not on:
+                anchors[index] = None
+                continue
+            pose = data.oMf[frame]
+            anchor = anchors[index]
+            if anchor is None:
+                anchors[index] = pose.copy()
+                continue
+            slip_m = max(slip_m, float(np.linalg.norm((pose.translation - anchor.translation)[:2])))
+            turn = pin.log3(anchor.rotation.T @ pose.rotation)
+            rotation_rad = max(rotation_rad, float(np.linalg.norm(turn)))
+    return slip_m, rotation_rad
+
+
 def compute_metrics(record: RunRecord) -> dict[str, Any]:
-    """The run's report: fall, CM excursion, tracking RMS, COP margin, torques, speed."""
+    """The run's report: fall, CM excursion, tracking RMS, COP margin, foot slip, torques, speed."""
     diagnostics = [c.diagnostics for c in record.commands]
     com = np.array([d.position_com_in_world for d in diagnostics])
     torques = np.array([c.joint_torque for c in record.commands])
@@ -66,6 +106,7 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
         if any(flags)
     ]
     errors = _joint_errors_rad(record)
+    slip_m, rotation_rad = _foot_slip_and_rotation(record)
     return {
         "scenario": record.scenario.name,
         "backend": record.scenario.backend,
@@ -79,6 +120,8 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
             group: float(np.sqrt(np.mean(values**2))) for group, values in sorted(errors.items())
         },
         "cop_strictly_inside_fraction": float(np.mean(cop_inside)) if cop_inside else 0.0,
+        "foot_slip_m": slip_m,
+        "foot_rotation_rad": rotation_rad,
         "peak_torque_Nm": float(np.abs(torques).max()),
         "peak_torque_fraction_of_limit": float(np.max(np.abs(torques) / limits)),
         "real_time_factor": record.real_time_factor,

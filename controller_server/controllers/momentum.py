@@ -533,6 +533,7 @@ class MomentumController(Controller):
             "angular_momentum_rate_achieved": momentum.S @ acceleration + momentum.s_bias,
             "center_of_pressure": cop,
             "centroidal_moment_pivot": cmp_,
+            "supports": list(flags),
             "support_polygon_xy": polygon.reshape(-1),
             "angular_momentum_weight": self._last_optimizer["angular_momentum_weight"],
             "objective_residuals": {o.name: o.residual(acceleration) for o in objectives},

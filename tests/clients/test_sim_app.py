@@ -79,3 +79,27 @@ def test_a_touching_foot_supports_once_loaded_until_it_lifts_off():
     assert flags == [False, True]
     flags = support_flags(flags, [True, True], np.array([10.0, 600.0]), threshold_N)
     assert flags == [False, True]
+
+
+def test_foot_slip_and_rotation_are_measured_only_while_supporting(server):
+    """A supporting foot that slides 5 cm and yaws 0.1 rad is reported; a lifted one is not."""
+    from clients import ControllerClient
+    from clients.sim.metrics import _foot_slip_and_rotation
+    from clients.sim.runner import RunRecord, standing_state
+
+    with ControllerClient(server.endpoint, timeout_s=10.0) as client:
+        welcome = client.connect("thesis_humanoid")
+    still = standing_state(welcome, {})
+    slid = standing_state(welcome, {})
+    slid.position_base_in_world[0] += 0.05
+    half_angle = 0.05  # yaw 0.1 rad about z
+    slid.orientation_base_in_world_xyzw[:] = [0.0, 0.0, np.sin(half_angle), np.cos(half_angle)]
+    record = RunRecord(load_scenario("stand"), welcome)
+    record.states = [still, slid]
+    record.contact_flags = [[True, True], [True, True]]
+    slip_m, rotation_rad = _foot_slip_and_rotation(record)
+    # 5 cm of slide plus the yaw's sweep of a sole frame ≤ 11 cm from the base: ±1.1 cm.
+    assert 0.039 < slip_m < 0.061
+    assert rotation_rad == pytest.approx(0.1, rel=1e-9)
+    record.contact_flags = [[True, True], [False, False]]
+    assert _foot_slip_and_rotation(record) == (0.0, 0.0)

@@ -81,6 +81,7 @@ def sample_messages():
                 angular_momentum_rate_achieved=[0.0, 0.0, 0.0],
                 center_of_pressure=[0.01, 0.0, 0.0],
                 centroidal_moment_pivot=[0.0, 0.0, 0.0],
+                supports=[True, False],
                 support_polygon_xy=[0.1, 0.1, -0.1, 0.1, -0.1, -0.1],
                 angular_momentum_weight=0.1,
                 objective_residuals={"tracking": 0.5},
