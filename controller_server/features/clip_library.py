@@ -59,17 +59,6 @@ def _arms(shoulder: float, elbow: float = 0.0) -> dict[str, tuple[float, float, 
     }
 
 
-def _leg_circle() -> list[Keyframe]:
-    """The left foot draws a loop forward, out to the side and back (4 s), knee soft."""
-    frames: list[Keyframe] = [(0.0, {}), (0.6, {"left_hip": (0.0, -0.1, 0.0)})]
-    for k in range(1, 9):
-        phase = 2.0 * math.pi * k / 8
-        hip = (0.25 * (1.0 - math.cos(phase)), -0.1 - 0.3 * math.sin(phase), 0.0)
-        frames.append((0.6 + 0.45 * k, {"left_hip": hip, "left_knee": (0.0, 0.15, 0.0)}))
-    frames.append((4.8, {}))
-    return frames
-
-
 WEIGHT_SHIFT_ROLL_RAD = 0.12
 """Both legs rolled so the pelvis (and the CM) moves 8.75 cm right, over the right foot."""
 
@@ -114,7 +103,7 @@ def _on_right_foot(
 
 
 def _leg_circle() -> list[Keyframe]:
-    """The left foot draws a loop forward, out to the side and back (4.2 s), knee soft."""
+    """The left foot lifts, draws a loop forward, out and back (3.6 s), knee soft; 4.8 s."""
     frames: list[Keyframe] = [(0.0, {}), (0.6, {"left_hip": (0.0, -0.1, 0.0)})]
     for k in range(1, 9):
         phase = 2.0 * math.pi * k / 8
