@@ -5,6 +5,8 @@ Flat ground at height ``h`` with normal +z (gravity −z), as in the thesis.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = [
@@ -17,6 +19,8 @@ __all__ = [
 
 MIN_NORMAL_FORCE_N = 1e-6
 """Below this total normal force the COP and CMP are undefined (NaN)."""
+COLLINEAR_SINE = 1e-9
+"""Hull vertices whose edges turn by less than this (sine of the angle) are dropped."""
 
 
 def center_of_pressure(
@@ -76,13 +80,15 @@ def support_polygon(points_in_world: np.ndarray) -> np.ndarray:
     if len(points) <= 2:
         return np.array(points).reshape(-1, 2)
 
-    def turn(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    def left_turn(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> bool:
+        """Strictly left, relative to the edge lengths: collinear up to round-off is not."""
+        ax, ay, bx, by = a[0] - o[0], a[1] - o[1], b[0] - o[0], b[1] - o[1]
+        return ax * by - ay * bx > COLLINEAR_SINE * math.hypot(ax, ay) * math.hypot(bx, by)
 
     def chain(ordered: list[tuple[float, float]]) -> list[tuple[float, float]]:
         hull: list[tuple[float, float]] = []
         for point in ordered:
-            while len(hull) >= 2 and turn(hull[-2], hull[-1], point) <= 0.0:
+            while len(hull) >= 2 and not left_turn(hull[-2], hull[-1], point):
                 hull.pop()
             hull.append(point)
         return hull
@@ -95,16 +101,20 @@ def shrink_polygon(polygon_xy: np.ndarray, margin: float) -> np.ndarray:
     """Move every edge of a convex counter-clockwise polygon inward by ``margin`` (m).
 
     Each new vertex is where the two offset edges around an old vertex meet.
-    A polygon too small for the margin (or with fewer than three vertices)
-    collapses to its vertex mean, a single point.
+    Vertices where the boundary does not turn (repeated or collinear up to
+    round-off) are dropped first, since their offset edges are parallel. A
+    polygon with fewer than three vertices left, or too small for the
+    margin, collapses to its vertex mean, a single point.
     """
     polygon_xy = np.asarray(polygon_xy, dtype=float).reshape(-1, 2)
-    centre = polygon_xy.mean(axis=0, keepdims=True) if len(polygon_xy) else np.zeros((1, 2))
-    # Vertices closer than 1 nm to the next give no edge direction: drop them.
-    gaps = np.linalg.norm(np.roll(polygon_xy, -1, axis=0) - polygon_xy, axis=1)
-    polygon_xy = polygon_xy[gaps > 1e-9]
-    if len(polygon_xy) < 3 or margin <= 0.0:
-        return polygon_xy if margin <= 0.0 else centre
+    if not len(polygon_xy):
+        return np.zeros((1, 2))
+    centre = polygon_xy.mean(axis=0, keepdims=True)
+    polygon_xy = _turning_vertices(polygon_xy)
+    if len(polygon_xy) < 3:
+        return centre
+    if margin <= 0.0:
+        return polygon_xy
     edges = np.roll(polygon_xy, -1, axis=0) - polygon_xy
     normals = np.column_stack([edges[:, 1], -edges[:, 0]])  # outward for counter-clockwise
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
@@ -118,11 +128,26 @@ def shrink_polygon(polygon_xy: np.ndarray, margin: float) -> np.ndarray:
             (n_prev[:, 0] * offsets - o_prev * normals[:, 0]) / determinant,
         ]
     )
-    # Too much margin turns the offset polygon inside out.
-    shrunk_edges = np.roll(shrunk, -1, axis=0) - shrunk
-    if np.any(np.einsum("ij,ij->i", shrunk_edges, edges) <= 0.0):
+    # Too much margin turns the offset polygon inside out: some vertex is then
+    # closer than `margin` to (or beyond) an original edge.
+    clearance = offsets[None, :] + margin - shrunk @ normals.T  # distance inside each edge
+    if not np.all(np.isfinite(shrunk)) or clearance.min() < margin * (1.0 - 1e-9):
         return centre
     return shrunk
+
+
+def _turning_vertices(polygon_xy: np.ndarray) -> np.ndarray:
+    """The vertices where a closed polygon turns by more than round-off."""
+    while len(polygon_xy) >= 3:
+        before = polygon_xy - np.roll(polygon_xy, 1, axis=0)
+        after = np.roll(polygon_xy, -1, axis=0) - polygon_xy
+        sine = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+        scale = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
+        flat = ~(sine > COLLINEAR_SINE * scale)
+        if not flat.any():
+            break
+        polygon_xy = np.delete(polygon_xy, int(np.argmax(flat)), axis=0)
+    return polygon_xy
 
 
 def closest_point_in_polygon(point_xy: np.ndarray, polygon_xy: np.ndarray) -> np.ndarray:

@@ -233,13 +233,20 @@ class Diagnostics(_Strict):
         "Angular momentum H about the CM.", shape="3", unit="kg·m²/s", frame="world"
     )
     linear_momentum_rate_desired: FloatArray = wire_field(
-        "L̇_des of eq. 5.9 (z is NaN: not controlled).", shape="3", unit="N", frame="world"
+        "L̇_des of eq. 5.9, limited to what the feet can push (z NaN: not controlled; "
+        "all NaN when the objective is off).",
+        shape="3",
+        unit="N",
+        frame="world",
     )
     linear_momentum_rate_achieved: FloatArray = wire_field(
         "L̇ = R q̈ + r_bias for the returned q̈.", shape="3", unit="N", frame="world"
     )
     angular_momentum_rate_desired: FloatArray = wire_field(
-        "Ḣ_des of eq. 5.15.", shape="3", unit="N·m", frame="world"
+        "Ḣ_des = −k_H H (eq. 5.15 is k_H = 0); NaN when the objective is off.",
+        shape="3",
+        unit="N·m",
+        frame="world",
     )
     angular_momentum_rate_achieved: FloatArray = wire_field(
         "Ḣ = S q̈ + s_bias for the returned q̈.", shape="3", unit="N·m", frame="world"

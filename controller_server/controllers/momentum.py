@@ -483,8 +483,11 @@ class MomentumController(Controller):
             "objectives": objectives,
             "linear_momentum_rate_desired": desired_rate,
             "angular_momentum_weight": angular_weight,
-            "angular_momentum_rate_desired": -p["angular_momentum_damping"]
-            * momentum.angular_momentum,
+            "angular_momentum_rate_desired": (
+                -p["angular_momentum_damping"] * momentum.angular_momentum
+                if angular_weight > 0
+                else np.full(3, np.nan)
+            ),
         }
 
     def _ground_points(

@@ -11,7 +11,8 @@ moment pivot (eq. 3.9–3.10): the farther apart they are, the more the ground
 is changing the angular momentum, and the harder the objective holds it.
 Rows are divided by ``m_T`` like the linear objective's.
 
-Extension (off by default, thesis values): ``Ḣ_des = −k_H H`` damps the
+Extension (off in these functions' defaults, on in ``MomentumController``'s:
+``k_H = 10``, ``β_0 = 10``): ``Ḣ_des = −k_H H`` damps the
 angular momentum instead of holding it, and a floor ``β_0`` on the weight
 keeps the objective alive when the COP and CMP coincide (``β_ba = β_0 +
 γ ‖p − g‖``). A push above the CM leaves the body pitching; holding that

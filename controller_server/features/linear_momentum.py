@@ -70,7 +70,8 @@ def admissible_linear_momentum_rate(
     """``L̇_des`` with its horizontal part limited so the ground can push it.
 
     The COP it needs must be in the polygon, and the horizontal force it needs
-    within friction, ``‖L̇_xy‖ ≤ μ m_T g`` (thesis ch. 7.3: on ice the CM may
+    within friction, ``|L̇_x|, |L̇_y| ≤ μ m_T g / √2`` (the pyramid inscribed in
+    the cone that the inverse dynamics uses; thesis ch. 7.3: on ice the CM may
     only be steered as fast as the feet can grip).
 
     Args:
@@ -83,18 +84,19 @@ def admissible_linear_momentum_rate(
         gravity: ``g`` (m/s²).
         friction_coefficient: Smallest μ of the supports.
     """
+    if not gravity > 0.0 or len(admissible_cop_polygon_xy) == 0:
+        return desired_rate
     lever = (position_com_in_world[2] - ground_height) / (total_mass * gravity)
-    if lever <= 0.0 or len(admissible_cop_polygon_xy) == 0:
+    if not 0.0 < lever < math.inf:
         return desired_rate
     com_xy = position_com_in_world[HORIZONTAL]
     cop = com_xy - lever * desired_rate[HORIZONTAL]
     admissible = desired_rate.copy()
     cop_admissible = closest_point_in_polygon(cop, admissible_cop_polygon_xy)
     admissible[HORIZONTAL] = (com_xy - cop_admissible) / lever
-    horizontal = float(np.linalg.norm(admissible[HORIZONTAL]))
-    grip = friction_coefficient * total_mass * gravity
-    if horizontal > grip:
-        admissible[HORIZONTAL] *= grip / horizontal
+    # Per axis, as the inverse dynamics' pyramid inscribed in the cone allows.
+    grip = friction_coefficient / math.sqrt(2.0) * total_mass * gravity
+    admissible[HORIZONTAL] = np.clip(admissible[HORIZONTAL], -grip, grip)
     return admissible
 
 

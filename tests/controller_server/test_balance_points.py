@@ -86,3 +86,48 @@ def test_admissible_rate_keeps_the_cop_it_needs_inside_the_shrunk_polygon(
     cop = com[:2] - com[2] * admissible[:2] / (mass * GRAVITY)
     np.testing.assert_allclose(cop, expected_cop_xy, atol=1e-12)
     assert np.isnan(admissible[2])
+
+
+def test_turned_feet_side_by_side_shrink_to_a_finite_polygon_inside_the_feet():
+    """Toe and heel lines of two aligned feet are collinear up to round-off at any yaw."""
+    foot = np.array([[0.189, 0.047], [0.189, -0.047], [-0.063, 0.047], [-0.063, -0.047]])
+    for yaw in np.linspace(0.0, 2.0 * np.pi, 2001):
+        rotation = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+        offset = np.array([0.0, 0.0875])
+        points = np.vstack([foot + offset, foot - offset]) @ rotation.T
+        polygon = support_polygon(np.column_stack([points, np.zeros(8)]))
+        assert len(polygon) == 4, (yaw, polygon)
+        shrunk = shrink_polygon(polygon, 0.02)
+        assert shrunk.shape == (4, 2) and np.all(np.isfinite(shrunk)), (yaw, shrunk)
+        for vertex in shrunk:
+            assert inside(vertex, polygon, 1e-12)
+            assert distance_to_boundary(vertex, polygon) == pytest.approx(0.02, abs=1e-9)
+
+
+def test_degenerate_polygons_collapse_to_a_point():
+    np.testing.assert_allclose(shrink_polygon(np.array([[0.1, 0.2]]), 0.0), [[0.1, 0.2]])
+    segment = np.array([[0.0, 0.0], [0.2, 0.0]])
+    np.testing.assert_allclose(shrink_polygon(segment, 0.02), [[0.1, 0.0]])
+
+
+def test_zero_gravity_leaves_the_rate_alone():
+    desired = np.array([10.0, -5.0, np.nan])
+    out = admissible_linear_momentum_rate(
+        desired, 65.0, np.array([0.0, 0.0, 0.9]), SQUARE, 0.0, gravity=0.0
+    )
+    np.testing.assert_array_equal(out, desired)
+
+
+def test_the_rate_stays_within_the_inscribed_friction_pyramid():
+    mu, mass = 0.03, 65.0
+    out = admissible_linear_momentum_rate(
+        np.array([-400.0, 300.0, np.nan]),
+        mass,
+        np.array([0.0, 0.0, 0.9]),
+        SQUARE,
+        0.0,
+        GRAVITY,
+        friction_coefficient=mu,
+    )
+    grip = mu / np.sqrt(2.0) * mass * GRAVITY
+    np.testing.assert_allclose(out[:2], [-grip, grip])
