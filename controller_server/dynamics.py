@@ -24,6 +24,7 @@ q_joints]``, ``v = [v_base_in_base, ω_base_in_base, v_joints]``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 import pinocchio as pin
@@ -134,6 +135,11 @@ def _points_on_frame(
     )
 
 
+@cache
+def _lower_triangle(size: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.tril_indices(size, -1)
+
+
 def compute_dynamics_terms(
     robot: RobotModel, data: pin.Data, q: np.ndarray, v: np.ndarray
 ) -> DynamicsTerms:
@@ -150,7 +156,10 @@ def compute_dynamics_terms(
     """
     model = robot.model
     pin.computeAllTerms(model, data, q, v)
-    mass_matrix = np.triu(data.M) + np.triu(data.M, 1).T
+    # Pinocchio fills the upper triangle of M; mirror it (indices cached per size).
+    mass_matrix = data.M.copy()
+    lower = _lower_triangle(model.nv)
+    mass_matrix[lower] = mass_matrix.T[lower]
     bias_forces = data.nle.copy()
     position_com = data.com[0].copy()
     total_mass = float(data.mass[0])

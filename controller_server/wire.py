@@ -108,11 +108,11 @@ def command_from_output(
         "contact_force_in_world": output.contact_force_in_world.reshape(-1),
         "contact_wrench_in_world": output.contact_wrench_in_world.reshape(-1),
     }
-    for field, array in arrays.items():
-        if not np.all(np.isfinite(array)):
-            raise ProtocolError(
-                ErrorCode.INTERNAL, field, "the controller produced NaN/inf; not sent", seq
-            )
-    arrays = {key: np.array(value, dtype=np.float64) for key, value in arrays.items()}
+    if not np.isfinite(np.concatenate(list(arrays.values()))).all():
+        field = next(key for key, array in arrays.items() if not np.isfinite(array).all())
+        raise ProtocolError(
+            ErrorCode.INTERNAL, field, "the controller produced NaN/inf; not sent", seq
+        )
+    # Fresh arrays of this tick (views of the controller's output), encoded at once.
     diagnostics = Diagnostics.model_construct(compute_time_s=compute_time_s, **output.diagnostics)
     return Command.model_construct(seq=seq, diagnostics=diagnostics, **arrays)
