@@ -338,6 +338,10 @@ class MomentumController(Controller):
             bool(on and allowed > 0.5)
             for on, allowed in zip(control_input.contact_flags, p["support_mask"], strict=True)
         )
+        supporting = [
+            pts for pts, on in zip(terms.position_points_in_world, flags, strict=True) if on
+        ]
+        polygon = support_polygon(np.vstack(supporting)) if supporting else np.zeros((0, 2))
         run_optimizer = (
             self._last_solution is None
             or flags != self._last_flags
@@ -346,7 +350,7 @@ class MomentumController(Controller):
         self._ticks += 1
         if run_optimizer:
             wrenches = control_input.contact_wrench_in_world if measured else self._last_wrenches
-            self._optimize(control_input, terms, wrenches, flags)
+            self._optimize(control_input, terms, wrenches, flags, polygon)
         solution = self._last_solution
         assert solution is not None
         dynamics = solve_inverse_dynamics(
@@ -366,7 +370,7 @@ class MomentumController(Controller):
             joint_torque=dynamics.joint_torque,
             contact_force_in_world=dynamics.contact_force_in_world,
             contact_wrench_in_world=dynamics.contact_wrench_in_world,
-            diagnostics=self._diagnostics(terms, dynamics, flags, run_optimizer),
+            diagnostics=self._diagnostics(terms, dynamics, flags, polygon, run_optimizer),
         )
 
     def _reference(self, control_input: ControlInput) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -393,6 +397,7 @@ class MomentumController(Controller):
         terms: DynamicsTerms,
         wrenches: np.ndarray | None,
         flags: tuple[bool, ...],
+        polygon: np.ndarray,
     ) -> None:
         p, model = self._params, self.robot.model
         q, v = control_input.q, control_input.v
@@ -435,14 +440,11 @@ class MomentumController(Controller):
                 p["momentum_stiffness"],
                 p["momentum_damping"],
             )
-            supporting = [
-                pts for pts, on in zip(terms.position_points_in_world, flags, strict=True) if on
-            ]
             desired_rate = admissible_linear_momentum_rate(
                 desired_rate,
                 mass,
                 terms.position_com_in_world,
-                shrink_polygon(support_polygon(np.vstack(supporting)), p["cop_margin"]),
+                shrink_polygon(polygon, p["cop_margin"]),
                 p["ground_height"],
                 float(np.linalg.norm(model.gravity.linear)),
                 friction_coefficient=min(
@@ -513,6 +515,7 @@ class MomentumController(Controller):
         terms: DynamicsTerms,
         dynamics: InverseDynamicsResult,
         flags: tuple[bool, ...],
+        polygon: np.ndarray,
         optimizer_ran: bool,
     ) -> dict[str, Any]:
         solution = self._last_solution
@@ -520,10 +523,6 @@ class MomentumController(Controller):
         momentum, acceleration = terms.momentum, dynamics.acceleration
         objectives: list[Objective] = self._last_optimizer["objectives"]
         cop, cmp_ = self._ground_points(terms, dynamics.contact_wrench_in_world, flags)
-        supporting = [
-            pts for pts, on in zip(terms.position_points_in_world, flags, strict=True) if on
-        ]
-        polygon = support_polygon(np.vstack(supporting)) if supporting else np.zeros((0, 2))
         return {
             "optimizer_ran": optimizer_ran,
             "position_com_in_world": terms.position_com_in_world,
