@@ -105,66 +105,74 @@ def shrink_polygon(polygon_xy: np.ndarray, margin: float) -> np.ndarray:
     round-off) are dropped first, since their offset edges are parallel. A
     polygon with fewer than three vertices left, or too small for the
     margin, collapses to its vertex mean, a single point.
+
+    A handful of vertices per tick: scalar arithmetic, no array temporaries.
     """
     polygon_xy = np.asarray(polygon_xy, dtype=float).reshape(-1, 2)
     if not len(polygon_xy):
         return np.zeros((1, 2))
     centre = polygon_xy.mean(axis=0, keepdims=True)
-    polygon_xy = _turning_vertices(polygon_xy)
-    if len(polygon_xy) < 3:
+    vertices = _turning_vertices([(x, y) for x, y in polygon_xy.tolist()])
+    if len(vertices) < 3:
         return centre
     if margin <= 0.0:
-        return polygon_xy
-    edges = np.roll(polygon_xy, -1, axis=0) - polygon_xy
-    normals = np.column_stack([edges[:, 1], -edges[:, 0]])  # outward for counter-clockwise
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    offsets = np.einsum("ij,ij->i", normals, polygon_xy) - margin
-    # Vertex i: where the offset edges i − 1 and i meet, n_j · p = o_j (Cramer's rule).
-    n_prev, o_prev = np.roll(normals, 1, axis=0), np.roll(offsets, 1)
-    determinant = n_prev[:, 0] * normals[:, 1] - n_prev[:, 1] * normals[:, 0]
-    shrunk = np.column_stack(
-        [
-            (o_prev * normals[:, 1] - n_prev[:, 1] * offsets) / determinant,
-            (n_prev[:, 0] * offsets - o_prev * normals[:, 0]) / determinant,
-        ]
-    )
+        return np.array(vertices)
+    # Offset edge i (from vertex i to i + 1): n_i · p = o_i, n_i its outward unit normal.
+    lines = []
+    for (x0, y0), (x1, y1) in zip(vertices, vertices[1:] + vertices[:1], strict=True):
+        length = math.hypot(x1 - x0, y1 - y0)
+        nx, ny = (y1 - y0) / length, (x0 - x1) / length
+        lines.append((nx, ny, nx * x0 + ny * y0 - margin))
+    # Vertex i: where the offset edges i − 1 and i meet (Cramer's rule).
+    shrunk = []
+    for (ax, ay, ao), (bx, by, bo) in zip(lines[-1:] + lines[:-1], lines, strict=True):
+        determinant = ax * by - ay * bx
+        shrunk.append(((ao * by - ay * bo) / determinant, (ax * bo - ao * bx) / determinant))
     # Too much margin turns the offset polygon inside out: some vertex is then
     # closer than `margin` to (or beyond) an original edge.
-    clearance = offsets[None, :] + margin - shrunk @ normals.T  # distance inside each edge
-    if not np.all(np.isfinite(shrunk)) or clearance.min() < margin * (1.0 - 1e-9):
-        return centre
-    return shrunk
+    limit = margin * (1.0 - 1e-9)
+    for x, y in shrunk:
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return centre
+        if any(o + margin - (nx * x + ny * y) < limit for nx, ny, o in lines):
+            return centre
+    return np.array(shrunk)
 
 
-def _turning_vertices(polygon_xy: np.ndarray) -> np.ndarray:
+def _turning_vertices(vertices: list[tuple[float, float]]) -> list[tuple[float, float]]:
     """The vertices where a closed polygon turns by more than round-off."""
-    while len(polygon_xy) >= 3:
-        before = polygon_xy - np.roll(polygon_xy, 1, axis=0)
-        after = np.roll(polygon_xy, -1, axis=0) - polygon_xy
-        sine = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
-        scale = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
-        flat = ~(sine > COLLINEAR_SINE * scale)
-        if not flat.any():
+    while len(vertices) >= 3:
+        for i, (x, y) in enumerate(vertices):
+            px, py = vertices[i - 1]
+            nx, ny = vertices[(i + 1) % len(vertices)]
+            bx, by, ax, ay = x - px, y - py, nx - x, ny - y
+            if not bx * ay - by * ax > COLLINEAR_SINE * math.hypot(bx, by) * math.hypot(ax, ay):
+                del vertices[i]
+                break
+        else:
             break
-        polygon_xy = np.delete(polygon_xy, int(np.argmax(flat)), axis=0)
-    return polygon_xy
+    return vertices
 
 
 def closest_point_in_polygon(point_xy: np.ndarray, polygon_xy: np.ndarray) -> np.ndarray:
-    """The point of a convex counter-clockwise polygon (segment, point) nearest ``point_xy``."""
-    point_xy = np.asarray(point_xy, dtype=float)
-    polygon_xy = np.asarray(polygon_xy, dtype=float).reshape(-1, 2)
-    if len(polygon_xy) >= 3:
-        edges = np.roll(polygon_xy, -1, axis=0) - polygon_xy
-        outward = edges[:, 1] * (point_xy[0] - polygon_xy[:, 0]) - edges[:, 0] * (
-            point_xy[1] - polygon_xy[:, 1]
-        )
-        if np.all(outward <= 0.0):
-            return point_xy.copy()
-    starts = polygon_xy
-    ends = np.roll(polygon_xy, -1, axis=0)
-    segments = ends - starts
-    lengths_squared = np.maximum(np.einsum("ij,ij->i", segments, segments), 1e-300)
-    fractions = np.clip(np.einsum("ij,ij->i", point_xy - starts, segments) / lengths_squared, 0, 1)
-    candidates = starts + fractions[:, None] * segments
-    return candidates[np.argmin(np.linalg.norm(candidates - point_xy, axis=1))]
+    """The point of a convex counter-clockwise polygon (segment, point) nearest ``point_xy``.
+
+    A handful of vertices per tick: scalar arithmetic, no array temporaries.
+    """
+    px, py = (float(c) for c in point_xy[:2])
+    vertices = np.asarray(polygon_xy, dtype=float).reshape(-1, 2).tolist()
+    edges = list(zip(vertices, vertices[1:] + vertices[:1], strict=True))
+    if len(vertices) >= 3 and all(
+        (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0) >= 0.0 for (x0, y0), (x1, y1) in edges
+    ):
+        return np.array([px, py])
+    best, best_distance = (px, py), math.inf
+    for (x0, y0), (x1, y1) in edges:
+        sx, sy = x1 - x0, y1 - y0
+        fraction = ((px - x0) * sx + (py - y0) * sy) / max(sx * sx + sy * sy, 1e-300)
+        fraction = min(max(fraction, 0.0), 1.0)
+        cx, cy = x0 + fraction * sx, y0 + fraction * sy
+        distance = math.hypot(cx - px, cy - py)
+        if distance < best_distance:
+            best, best_distance = (cx, cy), distance
+    return np.array(best)

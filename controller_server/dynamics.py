@@ -31,7 +31,6 @@ import pinocchio as pin
 
 from controller_server.models import RobotModel
 from controller_server.momentum import MomentumRates, compute_momentum_rates
-from controller_server.spatial import skew, stacked_skew
 
 __all__ = ["DynamicsTerms", "PointKinematics", "compute_dynamics_terms", "point_kinematics"]
 
@@ -109,6 +108,11 @@ def point_kinematics(
     )
 
 
+_SKEW_INDEX = np.array([[3, 2, 1], [2, 3, 0], [1, 0, 3]])
+_SKEW_SIGN = np.array([[0.0, -1.0, 1.0], [1.0, 0.0, -1.0], [-1.0, 1.0, 0.0]])
+"""``[r]× = r_ext[_SKEW_INDEX] * _SKEW_SIGN`` with ``r_ext = [x, y, z, 0]`` (eq. A.4)."""
+
+
 def _points_on_frame(
     jacobian: np.ndarray,
     velocity: pin.Motion,
@@ -116,22 +120,25 @@ def _points_on_frame(
     placement: pin.SE3,
     points_in_frame: np.ndarray,
 ) -> PointKinematics:
-    """Points fixed to a frame, from the frame's world-aligned Jacobian, twist and drift."""
+    """Points fixed to a frame, from the frame's world-aligned Jacobian, twist and drift.
+
+    Per point ``p = o + r``: ``v_p = v_o − [r]× ω`` and, at ``q̈ = 0``,
+    ``a_p = a_o − [r]× α + ω × (ω × r)`` (App. C, eq. C.3 and C.7), all ``k``
+    points at once.
+    """
     offsets = points_in_frame @ placement.rotation.T  # (k, 3), world axes
     count = len(offsets)
-    # v_p = v_o + ω × r = v_o − [r]× ω, stacked over the k points: one (3k, 3) matrix.
-    lever = stacked_skew(offsets)
+    extended = np.zeros((count, 4))
+    extended[:, :3] = offsets
+    lever = extended[:, _SKEW_INDEX] * _SKEW_SIGN  # (k, 3, 3): [r]× per point
     omega = velocity.angular
-    omega_twice = skew(omega) @ skew(omega)
-    # a_p = a_o + α × r + ω × (ω × r) at q̈ = 0 (App. C, eq. C.3 and C.7).
-    point_drift = drift.linear - (lever @ drift.angular).reshape(count, 3)
+    # ω × (ω × r) = (ω · r) ω − |ω|² r
+    centripetal = (offsets @ omega)[:, None] * omega - (omega @ omega) * offsets
     return PointKinematics(
         position_in_world=placement.translation + offsets,
-        velocity_in_world=velocity.linear - (lever @ omega).reshape(count, 3),
-        jacobian=(jacobian[None, :3] - (lever @ jacobian[3:]).reshape(count, 3, -1)).reshape(
-            3 * count, -1
-        ),
-        drift=(point_drift + offsets @ omega_twice.T).reshape(-1),
+        velocity_in_world=velocity.linear - lever @ omega,
+        jacobian=(jacobian[:3] - lever @ jacobian[3:]).reshape(3 * count, -1),
+        drift=(drift.linear - lever @ drift.angular + centripetal).reshape(-1),
     )
 
 

@@ -30,11 +30,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from controller_server.constraints import Equality
 from controller_server.features import Objective
-from controller_server.solvers.damped import damped_solve_psd, damping_for_gain_bound
+from controller_server.solvers.damped import damped_cholesky, damped_solve_psd
 
 __all__ = ["KKTSolution", "WeightedProblem", "build_weighted_problem", "solve_weighted_kkt"]
 
@@ -129,40 +128,41 @@ def solve_weighted_kkt(problem: WeightedProblem) -> KKTSolution:
     start = time.perf_counter()
     C, d = problem.equality.C, problem.equality.d
     n = problem.gradient.size
-    eigenvalues = np.linalg.eigvalsh(problem.hessian)
-    sigma_min = math.sqrt(max(float(eigenvalues[0]), 0.0))
-    objective_damping = damping_for_gain_bound(sigma_min, problem.objective_gain_bound)
-    hessian = problem.hessian + objective_damping**2 * np.eye(n)
-    damped_eigenvalues = eigenvalues + objective_damping**2
-    objective_condition = (
-        float(damped_eigenvalues[-1] / damped_eigenvalues[0])
-        if damped_eigenvalues[0] > 0
-        else math.inf
-    )
-    try:
-        factor = scipy.linalg.cho_factor(hessian, check_finite=False)
-    except np.linalg.LinAlgError:
+    factor = damped_cholesky(problem.hessian, problem.objective_gain_bound)
+    if factor is None:
         failed = np.zeros(n)
         return KKTSolution(
             False,
             failed,
             failed,
             np.zeros(len(d)),
-            objective_damping,
+            math.nan,
             0.0,
             math.inf,
             math.inf,
             math.inf,
             time.perf_counter() - start,
         )
-    x_free = scipy.linalg.cho_solve(factor, problem.gradient, check_finite=False)
+    x_free = factor.solve(problem.gradient)
     if C.shape[0] == 0:
         multipliers, constraint_damping, schur_condition, x = np.zeros(0), 0.0, 1.0, x_free
     else:
-        M_inv_CT = scipy.linalg.cho_solve(factor, C.T, check_finite=False)
-        multipliers, constraint_damping, schur_condition = damped_solve_psd(
-            C @ M_inv_CT, d - C @ x_free, problem.constraint_gain_bound
-        )
+        M_inv_CT = factor.solve(C.T)
+        schur = C @ M_inv_CT
+        schur_factor = damped_cholesky(schur, problem.constraint_gain_bound)
+        if schur_factor is None:
+            multipliers, constraint_damping, schur_condition = damped_solve_psd(
+                schur, d - C @ x_free, problem.constraint_gain_bound
+            )
+        else:
+            multipliers = schur_factor.solve(d - C @ x_free)
+            constraint_damping = schur_factor.damping
+            schur_condition = schur_factor.damped_condition
+            if constraint_damping > 0:  # report the undamped Schur complement's conditioning
+                eigenvalues = np.linalg.eigvalsh(schur)
+                schur_condition = (
+                    float(eigenvalues[-1] / eigenvalues[0]) if eigenvalues[0] > 0 else math.inf
+                )
         x = x_free + M_inv_CT @ multipliers
     found = bool(np.all(np.isfinite(x)))
     if not found:
@@ -172,9 +172,9 @@ def solve_weighted_kkt(problem: WeightedProblem) -> KKTSolution:
         x=x,
         x_free=x_free,
         multipliers=multipliers,
-        objective_damping=objective_damping,
+        objective_damping=factor.damping,
         constraint_damping=constraint_damping,
-        objective_condition_number=objective_condition,
+        objective_condition_number=factor.damped_condition,
         schur_condition_number=float(schur_condition),
         constraint_residual=float(np.linalg.norm(C @ x - d)) if found else math.inf,
         solve_time_s=time.perf_counter() - start,
