@@ -6,13 +6,21 @@ Flat ground at height ``h`` with normal +z (gravity −z), as in the thesis.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from controller_server.spatial import cross
+
+if TYPE_CHECKING:
+    from controller_server.dynamics import DynamicsTerms
 
 __all__ = [
     "center_of_pressure",
     "centroidal_moment_pivot",
     "closest_point_in_polygon",
+    "ground_reference_points",
     "shrink_polygon",
     "support_polygon",
 ]
@@ -65,6 +73,36 @@ def centroidal_moment_pivot(
             position_com_in_world[1] - force[1] / force[2] * drop,
             ground_height,
         ]
+    )
+
+
+def ground_reference_points(
+    terms: DynamicsTerms,
+    contact_wrench_in_world: np.ndarray | None,
+    supports: Sequence[bool],
+    ground_height: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """COP and CMP of the contacts' ground wrenches (NaN without ground force).
+
+    Args:
+        terms: Dynamics at the current state (contact frame origins, CM).
+        contact_wrench_in_world: ``(contacts, 6)`` force and torque about each
+            contact frame origin, or ``None``.
+        supports: One flag per contact; the wrenches are summed about the
+            mean of the supporting frames' origins (all origins if none).
+        ground_height: Ground plane height (m).
+    """
+    if contact_wrench_in_world is None:
+        nan = np.full(3, np.nan)
+        return nan, nan
+    wrenches = np.asarray(contact_wrench_in_world).reshape(-1, 6)
+    origins = terms.position_contact_frames_in_world
+    reference = origins[list(supports)].mean(axis=0) if any(supports) else origins.mean(axis=0)
+    force = wrenches[:, :3].sum(axis=0)
+    torque = (wrenches[:, 3:] + cross(origins - reference, wrenches[:, :3])).sum(axis=0)
+    return (
+        center_of_pressure(force, torque, reference, ground_height),
+        centroidal_moment_pivot(terms.position_com_in_world, force, ground_height),
     )
 
 

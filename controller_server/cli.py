@@ -16,6 +16,9 @@ from pathlib import Path
 __all__ = ["build_parser", "main"]
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+CONTROLLER_NAMES = ["momentum", "prioritized", "tracking"]
+"""Controllers a client may pick (`controller_server.controllers.CONTROLLERS`; a test keeps
+them equal without importing the controllers at CLI start-up)."""
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -118,9 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="scenario names or .toml paths (default: push_sequence)",
     )
     sim.add_argument("--backend", choices=["reference", "mujoco"], help="override the backend")
-    sim.add_argument(
-        "--controller", choices=["momentum", "tracking"], help="override the controller"
-    )
+    sim.add_argument("--controller", choices=CONTROLLER_NAMES, help="override the controller")
     sim.add_argument("--output", default="out/sim", metavar="DIR", help="report directory")
     sim.add_argument(
         "--connect", default=None, metavar="ENDPOINT", help="use a running server at ENDPOINT"
@@ -159,7 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--controller",
         default="momentum",
-        choices=["momentum", "tracking"],
+        choices=CONTROLLER_NAMES,
         help="controller to run (default: momentum)",
     )
     demo.add_argument(

@@ -42,6 +42,7 @@ __all__ = [
     "minimum_norm_balance",
     "nearest_feasible_motion",
     "solve_inverse_dynamics",
+    "wrenches_from_point_forces",
 ]
 
 NUM_ROOT_DOFS = 6
@@ -152,7 +153,7 @@ def solve_inverse_dynamics(
         exact = solution is not None or np.allclose(generalized_force[:NUM_ROOT_DOFS], 0.0)
         if exact and np.all(np.abs(torque) <= torque_limit):
             forces[mask] = point_force.reshape(-1, 3)
-            wrenches = _wrenches_from_point_forces(terms, forces, counts)
+            wrenches = wrenches_from_point_forces(terms, forces, counts)
             return InverseDynamicsResult(torque, forces, wrenches, acceleration.copy(), 0.0, 0)
     nearest = nearest_feasible_motion(
         terms,
@@ -179,7 +180,7 @@ def solve_inverse_dynamics(
     else:
         target, point_force = nearest
     forces[mask] = point_force.reshape(-1, 3)
-    wrenches = _wrenches_from_point_forces(terms, forces, counts)
+    wrenches = wrenches_from_point_forces(terms, forces, counts)
     return _realize(terms, target, point_jacobian.T @ point_force, forces, wrenches, torque_limit)
 
 
@@ -340,7 +341,7 @@ def nearest_feasible_motion(
     return solution[:nv], solution[nv:]
 
 
-def _wrenches_from_point_forces(
+def wrenches_from_point_forces(
     terms: DynamicsTerms, forces: np.ndarray, counts: Sequence[int]
 ) -> np.ndarray:
     """Per contact: total force and torque about the contact frame origin."""

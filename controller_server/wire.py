@@ -16,7 +16,7 @@ import pinocchio as pin
 from controller_server.controllers import ControlInput, ControlOutput
 from controller_server.models import RobotModel
 from protocol.errors import ErrorCode, ProtocolError
-from protocol.messages import Command, Diagnostics, State
+from protocol.messages import Command, Diagnostics, PriorityLevelReport, State
 
 __all__ = ["command_from_output", "control_input_from_state"]
 
@@ -114,5 +114,11 @@ def command_from_output(
             ErrorCode.INTERNAL, field, "the controller produced NaN/inf; not sent", seq
         )
     # Fresh arrays of this tick (views of the controller's output), encoded at once.
-    diagnostics = Diagnostics.model_construct(compute_time_s=compute_time_s, **output.diagnostics)
+    values = output.diagnostics
+    if values.get("priority_levels") is not None:
+        levels = [
+            PriorityLevelReport.model_construct(**level) for level in values["priority_levels"]
+        ]
+        values = {**values, "priority_levels": levels}
+    diagnostics = Diagnostics.model_construct(compute_time_s=compute_time_s, **values)
     return Command.model_construct(seq=seq, diagnostics=diagnostics, **arrays)

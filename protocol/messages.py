@@ -29,6 +29,7 @@ __all__ = [
     "JointInfo",
     "Message",
     "Params",
+    "PriorityLevelReport",
     "SessionStats",
     "SetParams",
     "State",
@@ -213,6 +214,21 @@ class State(Message):
     )
 
 
+class PriorityLevelReport(_Strict):
+    """One priority level of the prioritized controller (de Lasa 2010, Algorithm 1)."""
+
+    objectives: list[str] = wire_field("Objectives combined in this level (eq. 37).")
+    status: str = wire_field(
+        "`solved`, `infeasible` (the QP had no solution: the levels above are returned), "
+        "`not reached` (no freedom left, or after an infeasible level) or `empty`."
+    )
+    residual: float = wire_field("‖W^½ (A x − b)‖ of the level at the returned x.")
+    rank: int = wire_field("Directions of A C̄ this level used (σ ≥ 1/B).")
+    null_space_dimension: int = wire_field("Freedom left to the levels below.")
+    damping: float = wire_field("Damping λ of the level's solve (Maciejewski eq. 15).")
+    used_qp: bool = wire_field("Whether an inequality was active, so a QP was solved.")
+
+
 class Diagnostics(_Strict):
     """What the controller did this tick (for logs and plots)."""
 
@@ -294,6 +310,16 @@ class Diagnostics(_Strict):
         "Norm of the root wrench the contact forces could not balance.", unit="N, N·m"
     )
     saturated_joints: int = wire_field("Number of DoFs whose torque hit its limit.")
+    priority_levels: list[PriorityLevelReport] | None = wire_field(
+        "Prioritized controller: one report per level, highest priority first "
+        "(level 0 is the equations of motion); absent for the weighted controllers.",
+        default=None,
+    )
+    inequality_violation: float | None = wire_field(
+        "Prioritized controller: max(0, −(D x + f)) over λ ≥ 0, non-penetration, torque "
+        "and joint limits; absent for the weighted controllers.",
+        default=None,
+    )
 
 
 class Command(Message):

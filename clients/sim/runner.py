@@ -153,7 +153,8 @@ def run_scenario(
         welcome = client.connect(
             scenario.model,
             controller=scenario.controller,
-            params={**scenario.params, "ground_force_mode": scenario.ground_force_mode},
+            # Only the weighted controllers have a measured mode; distributed is their default.
+            params={**scenario.params, **({"ground_force_mode": "measured"} if measured else {})},
             client_name=f"poise sim {scenario.name}",
         )
         backend.reset(standing_state(welcome, scenario.initial_joint_position))

@@ -5,6 +5,7 @@ from typing import Any
 
 from controller_server.controllers.base import ControlInput, Controller, ControlOutput, ParamSpec
 from controller_server.controllers.momentum import MomentumController, TrackingController
+from controller_server.controllers.prioritized import PrioritizedController
 from controller_server.models import RobotModel
 from protocol.errors import ErrorCode, ProtocolError
 
@@ -15,12 +16,13 @@ __all__ = [
     "Controller",
     "MomentumController",
     "ParamSpec",
+    "PrioritizedController",
     "TrackingController",
     "create_controller",
 ]
 
 CONTROLLERS: dict[str, type[Controller]] = {
-    cls.name: cls for cls in (TrackingController, MomentumController)
+    cls.name: cls for cls in (TrackingController, MomentumController, PrioritizedController)
 }
 """Controller classes by the name a client gives in ``hello``."""
 

@@ -16,11 +16,19 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
+import pinocchio as pin
 
 from controller_server.errors import InvalidParams
 from controller_server.models import RobotModel
 
-__all__ = ["ControlInput", "ControlOutput", "Controller", "ParamSpec", "vector_value"]
+__all__ = [
+    "ControlInput",
+    "ControlOutput",
+    "Controller",
+    "ParamSpec",
+    "normalized_configuration_part",
+    "vector_value",
+]
 
 
 def vector_value(field: str, value: Any, length: int) -> np.ndarray:
@@ -35,6 +43,22 @@ def vector_value(field: str, value: Any, length: int) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         raise InvalidParams(field, f"{value=!r} must be finite")
     return array
+
+
+def normalized_configuration_part(
+    robot: RobotModel, field: str, values: np.ndarray, part: slice
+) -> np.ndarray:
+    """``values`` written into ``q[part]``, quaternions (root, ball joints) normalized.
+
+    Raises:
+        InvalidParams: A quaternion in ``part`` is (nearly) zero.
+    """
+    q = pin.neutral(robot.model)
+    q[part] = values
+    starts = [3, *(7 + robot.ball_quaternion_starts)]
+    if any(np.linalg.norm(q[s : s + 4]) < 1e-9 for s in starts):
+        raise InvalidParams(field, "quaternions must be non-zero")
+    return pin.normalize(robot.model, q)[part]
 
 
 @dataclass(frozen=True)

@@ -29,8 +29,7 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.balance_points import (
-    center_of_pressure,
-    centroidal_moment_pivot,
+    ground_reference_points,
     shrink_polygon,
     support_polygon,
 )
@@ -40,6 +39,7 @@ from controller_server.controllers.base import (
     Controller,
     ControlOutput,
     ParamSpec,
+    normalized_configuration_part,
     vector_value,
 )
 from controller_server.dynamics import DynamicsTerms, compute_dynamics_terms, point_kinematics
@@ -63,7 +63,6 @@ from controller_server.features import (
 from controller_server.inverse_dynamics import InverseDynamicsResult, solve_inverse_dynamics
 from controller_server.models import RobotModel
 from controller_server.solvers import KKTSolution, build_weighted_problem, solve_weighted_kkt
-from controller_server.spatial import cross
 
 __all__ = ["MomentumController", "TrackingController"]
 
@@ -313,14 +312,12 @@ class MomentumController(Controller):
 
     def _validate(self, key: str, value: Any) -> Any:
         array = super()._validate(key, value)
-        if key in ("reference_joint_position", "reference_base_orientation_xyzw"):
-            # Quaternions (root and ball joints) are normalised through Pinocchio.
-            q = pin.neutral(self.robot.model)
-            target = slice(7, None) if key == "reference_joint_position" else slice(3, 7)
-            q[target] = array
-            if np.linalg.norm(q[3:7]) < 1e-9:
-                raise InvalidParams(f"params.{key}", "quaternion must be non-zero")
-            array = pin.normalize(self.robot.model, q)[target]
+        parts = {
+            "reference_joint_position": slice(7, None),
+            "reference_base_orientation_xyzw": slice(3, 7),
+        }
+        if key in parts:
+            array = normalized_configuration_part(self.robot, f"params.{key}", array, parts[key])
         return array
 
     # One tick -------------------------------------------------------------------
@@ -456,7 +453,7 @@ class MomentumController(Controller):
                     momentum, mass, desired_rate, p["weight_linear_momentum"]
                 )
             )
-        cop, cmp_ = self._ground_points(terms, wrenches, flags)
+        cop, cmp_ = ground_reference_points(terms, wrenches, flags, p["ground_height"])
         angular_weight = angular_momentum_weight(
             p["angular_momentum_gain"], cop, cmp_, p["weight_angular_momentum"]
         )
@@ -492,24 +489,6 @@ class MomentumController(Controller):
             ),
         }
 
-    def _ground_points(
-        self, terms: DynamicsTerms, wrenches: np.ndarray | None, flags: tuple[bool, ...]
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """COP and CMP of the given contact wrenches (NaN without ground force)."""
-        if wrenches is None:
-            nan = np.full(3, np.nan)
-            return nan, nan
-        wrenches = np.asarray(wrenches).reshape(-1, 6)
-        origins = terms.position_contact_frames_in_world
-        reference = origins[list(flags)].mean(axis=0) if any(flags) else origins.mean(axis=0)
-        force = wrenches[:, :3].sum(axis=0)
-        torque = (wrenches[:, 3:] + cross(origins - reference, wrenches[:, :3])).sum(axis=0)
-        height = self._params["ground_height"]
-        return (
-            center_of_pressure(force, torque, reference, height),
-            centroidal_moment_pivot(terms.position_com_in_world, force, height),
-        )
-
     def _diagnostics(
         self,
         terms: DynamicsTerms,
@@ -522,7 +501,9 @@ class MomentumController(Controller):
         assert solution is not None
         momentum, acceleration = terms.momentum, dynamics.acceleration
         objectives: list[Objective] = self._last_optimizer["objectives"]
-        cop, cmp_ = self._ground_points(terms, dynamics.contact_wrench_in_world, flags)
+        cop, cmp_ = ground_reference_points(
+            terms, dynamics.contact_wrench_in_world, flags, self._params["ground_height"]
+        )
         return {
             "optimizer_ran": optimizer_ran,
             "position_com_in_world": terms.position_com_in_world,

@@ -1,0 +1,703 @@
+"""Prioritized feature-based balance controller (de Lasa, Mordatch & Hertzmann 2010).
+
+Unknowns ``x = [τ, q̈, λ]`` (eq. 1), with the contact force of every support
+point in the basis of its linearized friction cone, ``f = V λ`` (eq. 23).
+Objectives are least-squares rows over ``x``, grouped in priority levels and
+solved by Algorithm 1 (:func:`controller_server.solvers.solve_prioritized`):
+
+0. equations of motion ``‖Sᵀ τ − M q̈ + J_cᵀ V λ − h‖²`` (eq. 22–24), as the
+   top-priority objective §8.2 recommends instead of a hard equality;
+1. ``contact``: setpoints on the sole points of the supporting feet, toward
+   their projections on the ground (Table 1, §4);
+2. ``com``: the CM over the centroid of the support points, and
+   ``com_height``: its height (a target objective, eq. 6–7, while a new
+   height is being reached; a setpoint otherwise);
+3. ``angular_momentum``: ``L̇_d = k_p (L_r − L)`` (eq. 8–9), ``pose``: rest
+   pose (§4), ``torque``: minimum torque on selected joints (eq. 15);
+4. ``forces``: ``‖λ‖²``, below everything. The rest pose fixes ``q̈`` but not
+   the internal forces between two feet, which would otherwise be whatever
+   the QP solver returns (torques chattering to their limits); this picks
+   the smallest, as the weighted controller's distribution does.
+
+Priorities and weights (eq. 37) of every objective, and its gains and
+references, change at run time through ``set_params``. Inequalities
+``D x + f ≥ 0``: ``λ ≥ 0`` (eq. 25), non-penetration ``Vᵀ(J_c q̈ + J̇_c q̇) ≥ 0``
+(eq. 26, flat static ground so ``V̇ = 0``), torque limits, and joints at a
+limit may not accelerate further out (eq. 27, see :func:`_joint_limit_rows`).
+
+Setpoint gains follow eq. 4: ``k_v = 2 ζ √k_p`` with damping ratio ``ζ = 1``
+by default (de Lasa's ``k_v = 2 √k_p``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+import pinocchio as pin
+
+from controller_server.balance_points import (
+    ground_reference_points,
+    shrink_polygon,
+    support_polygon,
+)
+from controller_server.controllers.base import (
+    ControlInput,
+    Controller,
+    ControlOutput,
+    ParamSpec,
+    normalized_configuration_part,
+)
+from controller_server.dynamics import DynamicsTerms, compute_dynamics_terms
+from controller_server.features import (
+    Objective,
+    admissible_linear_momentum_rate,
+    compute_tracking_objective,
+)
+from controller_server.features.setpoint import (
+    critical_damping,
+    setpoint_acceleration,
+    target_acceleration,
+)
+from controller_server.inverse_dynamics import wrenches_from_point_forces
+from controller_server.models import RobotModel
+from controller_server.solvers.prioritized import PrioritizedSolution, solve_prioritized
+
+__all__ = ["OBJECTIVES", "PrioritizedController", "friction_cone_basis"]
+
+NUM_ROOT_DOFS = 6
+
+OBJECTIVES: dict[str, tuple[int, str]] = {
+    "contact": (1, "sole points of the supports toward the ground (Table 1)"),
+    "com": (2, "CM over the centroid of the support points (Table 1, E_com∥)"),
+    "com_height": (2, "CM height (Table 1, E_com⊥)"),
+    "angular_momentum": (3, "L̇_d = k_p (L_r − L) (eq. 8–9)"),
+    "trunk": (2, "root (pelvis) orientation upright (cf. E_trunk of Table 2)"),
+    "pose": (3, "rest pose of the joints (§4, E_pose)"),
+    "torque": (3, "minimum torque on `torque_selection` (eq. 15)"),
+}
+"""Objective name → (default priority of Table 1, role)."""
+
+
+def friction_cone_basis(friction_coefficient: float) -> np.ndarray:
+    """``V``: ``(3, 4)`` unit edges of the friction pyramid on a ground of normal +z (eq. 23).
+
+    The edges ``(±μ', ±μ', 1)`` with ``μ' = μ/√2`` span the pyramid inscribed
+    in Coulomb's cone, the same pyramid the weighted controller's inverse
+    dynamics uses, so ``f = V λ`` with ``λ ≥ 0`` is always transmissible.
+    """
+    mu = friction_coefficient / math.sqrt(2.0)
+    edges = np.array([[mu, mu, 1.0], [mu, -mu, 1.0], [-mu, mu, 1.0], [-mu, -mu, 1.0]]).T
+    return edges / np.linalg.norm(edges, axis=0)
+
+
+def _priority_spec(name: str) -> ParamSpec:
+    default, role = OBJECTIVES[name]
+    return ParamSpec(
+        default, kind="int", minimum=1, maximum=10, doc=f"priority level of `{name}`: {role}"
+    )
+
+
+def _weight_spec(name: str) -> ParamSpec:
+    return ParamSpec(
+        1.0, minimum=0.0, maximum=1e6, doc=f"α of `{name}` within its level (eq. 37); 0 = off"
+    )
+
+
+class PrioritizedController(Controller):
+    """de Lasa et al.'s prioritized balance controller (Table 1, Algorithm 1)."""
+
+    name = "prioritized"
+    PARAMETERS: ClassVar[dict[str, ParamSpec]] = {
+        **{f"priority_{name}": _priority_spec(name) for name in OBJECTIVES},
+        **{f"weight_{name}": _weight_spec(name) for name in OBJECTIVES},
+        "contact_stiffness": ParamSpec(
+            100.0, minimum=0.0, maximum=1e6, doc="k_p of the contact setpoints (1/s²)"
+        ),
+        "com_stiffness": ParamSpec(20.0, minimum=0.0, maximum=1e6, doc="k_p of `com` (1/s²)"),
+        "com_offset_xy": ParamSpec(
+            [0.0, 0.0],
+            kind="vector",
+            minimum=-10.0,
+            maximum=10.0,
+            doc="y_r of `com` minus the centroid of the support points, x and y (m)",
+        ),
+        "cop_margin": ParamSpec(
+            0.02,
+            minimum=0.0,
+            maximum=1.0,
+            doc="`com` asks at most the CM acceleration whose COP stays this far inside "
+            "the support polygon (m)",
+        ),
+        "com_height": ParamSpec(
+            None,
+            minimum=0.0,
+            maximum=100.0,
+            doc="y_r of `com_height` above the ground (m); default the standing pose's",
+        ),
+        "com_height_stiffness": ParamSpec(
+            20.0, minimum=0.0, maximum=1e6, doc="k_p of `com_height` (1/s²)"
+        ),
+        "com_height_duration_s": ParamSpec(
+            0.5,
+            minimum=0.0,
+            maximum=100.0,
+            doc="T of the target objective (eq. 6–7) that reaches a new `com_height` (s)",
+        ),
+        "angular_momentum_stiffness": ParamSpec(
+            10.0, minimum=0.0, maximum=1e6, doc="k_p of eq. 9 (1/s)"
+        ),
+        "reference_angular_momentum": ParamSpec(
+            [0.0, 0.0, 0.0],
+            kind="vector",
+            minimum=-1e4,
+            maximum=1e4,
+            doc="L_r of eq. 9 about the CM, world axes (kg·m²/s); 0 damps rotation",
+        ),
+        "pose_stiffness": ParamSpec(30.0, minimum=0.0, maximum=1e6, doc="k_p of `pose` (1/s²)"),
+        "reference_joint_position": ParamSpec(
+            None,
+            kind="vector",
+            minimum=-1e3,
+            maximum=1e3,
+            doc="rest pose q_r, wire joint order (rad; ball: xyzw); default neutral",
+        ),
+        "trunk_stiffness": ParamSpec(30.0, minimum=0.0, maximum=1e6, doc="k_p of `trunk` (1/s²)"),
+        "reference_trunk_orientation_xyzw": ParamSpec(
+            [0.0, 0.0, 0.0, 1.0],
+            kind="vector",
+            minimum=-1.0,
+            maximum=1.0,
+            doc="y_r of `trunk`: root orientation in world, scalar last",
+        ),
+        "torque_selection": ParamSpec(
+            None,
+            kind="vector",
+            minimum=0.0,
+            maximum=1e6,
+            doc="diagonal of S in eq. 15 per joint DoF, wire order; default all 0 (off)",
+        ),
+        "damping_ratio": ParamSpec(
+            1.0, minimum=0.0, maximum=100.0, doc="ζ of every setpoint: k_v = 2 ζ √k_p (eq. 4)"
+        ),
+        "ground_height": ParamSpec(0.0, minimum=-1e3, maximum=1e3, doc="ground plane z (m)"),
+        "non_penetration": ParamSpec(
+            True, kind="bool", doc="enforce eq. 26 at the points carrying force"
+        ),
+        "contact_distance": ParamSpec(
+            0.005,
+            minimum=0.0,
+            maximum=1.0,
+            doc="sole points of a support this close to the ground carry force (m)",
+        ),
+        "friction_coefficients": ParamSpec(
+            None,
+            kind="vector",
+            minimum=0.0,
+            maximum=10.0,
+            doc="Coulomb μ per contact (welcome order); default the model's contacts' μ",
+        ),
+        "support_mask": ParamSpec(
+            None,
+            kind="vector",
+            minimum=0.0,
+            maximum=1.0,
+            doc="per contact (welcome order), 0 = never a support even when touching; "
+            "default all 1",
+        ),
+        "gain_bound": ParamSpec(
+            1e3,
+            minimum=1.0,
+            maximum=1e12,
+            doc="B of Algorithm 1 on levels scaled to unit norm: σ < 1/B is singular, damped "
+            "steps ‖w‖ ≤ B ‖b̄‖ (Maciejewski eq. 18)",
+        ),
+        "qp_solver": ParamSpec(
+            "daqp",
+            kind="choice",
+            choices=("daqp", "quadprog", "proxqp"),
+            doc="QP solver of the constrained levels (via qpsolvers)",
+        ),
+    }
+
+    def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
+        self._data = robot.model.createData()
+        self._height_change: tuple[float, float] | None = None  # (start value, start time)
+        self._pending_height_change = False
+        super().__init__(robot, params)
+
+    def default_value(self, key: str) -> Any:
+        """Model-dependent defaults: rest pose, standing CM height, per-contact vectors."""
+        robot = self.robot
+        if key == "reference_joint_position":
+            return pin.neutral(robot.model)[7:]
+        if key == "torque_selection":
+            return np.zeros(robot.nv_joints)
+        if key == "support_mask":
+            return np.ones(len(robot.contacts))
+        if key == "friction_coefficients":
+            return np.array([c.friction_coefficient for c in robot.contacts])
+        if key == "com_height":
+            q = pin.neutral(robot.model)
+            q[:3] = robot.standing_position_base_in_world
+            return float(pin.centerOfMass(robot.model, robot.model.createData(), q)[2])
+        return super().default_value(key)
+
+    def set_params(self, params: Mapping[str, Any]) -> None:
+        """Apply parameters; a new ``com_height`` starts a target objective (eq. 6–7)."""
+        old_height = self._params.get("com_height")
+        super().set_params(params)
+        if old_height is not None and self._params["com_height"] != old_height:
+            self._pending_height_change = True
+
+    def _validate(self, key: str, value: Any) -> Any:
+        validated = super()._validate(key, value)
+        parts = {
+            "reference_joint_position": slice(7, None),
+            "reference_trunk_orientation_xyzw": slice(3, 7),
+        }
+        if key in parts:
+            validated = normalized_configuration_part(
+                self.robot, f"params.{key}", validated, parts[key]
+            )
+        return validated
+
+    # One tick -------------------------------------------------------------------
+
+    def compute(self, control_input: ControlInput) -> ControlOutput:
+        """Build the levels and inequalities, solve them (Algorithm 1), read off τ, q̈, f."""
+        p, robot = self._params, self.robot
+        terms = compute_dynamics_terms(robot, self._data, control_input.q, control_input.v)
+        flags = tuple(
+            bool(on and allowed > 0.5)
+            for on, allowed in zip(control_input.contact_flags, p["support_mask"], strict=True)
+        )
+        layout = _Layout(
+            robot,
+            terms,
+            [allowed > 0.5 for allowed in p["support_mask"]],
+            flags,
+            p["friction_coefficients"],
+            p["ground_height"],
+            p["contact_distance"],
+        )
+        objectives = self._objectives(control_input, terms, layout)
+        levels: dict[int, list[Objective]] = {}
+        for name, objective in objectives.items():
+            if name not in ("dynamics", "forces") and np.any(objective.weight > 0):
+                levels.setdefault(p[f"priority_{name}"], []).append(objective)
+        ordered = [
+            _normalized(level)
+            for level in (
+                [objectives["dynamics"]],
+                *(levels[k] for k in sorted(levels)),
+                [objectives["forces"]],
+            )
+        ]
+        D, f = self._inequalities(control_input, terms, layout)
+        solution = solve_prioritized(
+            ordered, D, f, gain_bound=p["gain_bound"], qp_solver=p["qp_solver"]
+        )
+        return self._output(terms, layout, flags, objectives, solution)
+
+    def _objectives(
+        self, control_input: ControlInput, terms: DynamicsTerms, layout: _Layout
+    ) -> dict[str, Objective]:
+        p, model = self._params, self.robot.model
+        q, v = control_input.q, control_input.v
+        momentum, mass = terms.momentum, terms.total_mass
+        ratio = p["damping_ratio"]
+        objectives = {
+            "dynamics": Objective(
+                "dynamics",
+                np.hstack([layout.S_T, -terms.mass_matrix, layout.contact_force_map]),
+                terms.bias_forces,
+                np.ones(model.nv),
+            )
+        }
+        # Contact (Table 1, priority 1): each sole point toward its ground projection.
+        if layout.point_jacobian.shape[0]:
+            positions = layout.point_positions
+            velocities = (layout.point_jacobian @ v).reshape(-1, 3)
+            targets = positions.copy()
+            targets[:, 2] = p["ground_height"]
+            stiffness = p["contact_stiffness"]
+            desired = setpoint_acceleration(
+                targets, positions, velocities, stiffness, critical_damping(stiffness, ratio)
+            ).reshape(-1)
+            objectives["contact"] = layout.over_acceleration(
+                "contact",
+                layout.point_jacobian,
+                desired - layout.point_drift,
+                p["weight_contact"],
+            )
+        # CM over the support centroid and at its height (Table 1, priority 2).
+        com = terms.position_com_in_world
+        com_velocity = momentum.linear_momentum / mass
+        desired_com_acceleration = np.full(3, np.nan)
+        if layout.support_positions.shape[0]:
+            reference_xy = layout.support_positions[:, :2].mean(axis=0) + p["com_offset_xy"]
+            stiffness = p["com_stiffness"]
+            desired_xy = setpoint_acceleration(
+                reference_xy,
+                com[:2],
+                com_velocity[:2],
+                stiffness,
+                critical_damping(stiffness, ratio),
+            )
+            # Ask only what the ground can give without turning the body: the COP this
+            # needs stays `cop_margin` inside the feet (as the weighted controller's L̇_des).
+            # Otherwise `com` takes all of the COP's authority and the angular momentum
+            # objective below it has none left (a 220 N head push then fells the robot).
+            gravity = float(np.linalg.norm(model.gravity.linear))
+            admissible = admissible_linear_momentum_rate(
+                mass * np.array([*desired_xy, 0.0]),
+                mass,
+                com,
+                shrink_polygon(support_polygon(layout.support_positions), p["cop_margin"]),
+                p["ground_height"],
+                gravity,
+                friction_coefficient=layout.smallest_friction_coefficient,
+            )
+            desired_xy = admissible[:2] / mass
+            objectives["com"] = layout.over_acceleration(
+                "com",
+                momentum.R[:2] / mass,
+                desired_xy - momentum.r_bias[:2] / mass,
+                p["weight_com"],
+            )
+            desired_z = self._height_acceleration(control_input.time_s, com, com_velocity)
+            desired_com_acceleration = np.array([*desired_xy, desired_z])
+            objectives["com_height"] = layout.over_acceleration(
+                "com_height",
+                momentum.R[2:] / mass,
+                np.array([desired_z - momentum.r_bias[2] / mass]),
+                p["weight_com_height"],
+            )
+        # Angular momentum (eq. 8–9), rest pose and minimum torque (priority 3).
+        desired_rate = p["angular_momentum_stiffness"] * (
+            p["reference_angular_momentum"] - momentum.angular_momentum
+        )
+        objectives["angular_momentum"] = layout.over_acceleration(
+            "angular_momentum",
+            momentum.S / mass,  # per kg, as the CM rows (m/s²): weights in one level compare
+            (desired_rate - momentum.s_bias) / mass,
+            p["weight_angular_momentum"],
+        )
+        q_rest = pin.neutral(model)
+        q_rest[:3] = q[:3]
+        q_rest[3:7] = p["reference_trunk_orientation_xyzw"]
+        q_rest[7:] = p["reference_joint_position"]
+        zero = np.zeros(model.nv)
+        stiffness = p["pose_stiffness"]
+        pose = compute_tracking_objective(
+            model, q, v, q_rest, zero, zero, stiffness, critical_damping(stiffness, ratio), zero
+        )
+        # Rest pose on the joints (§4); the root's orientation is its own feature, `trunk`.
+        objectives["pose"] = layout.over_acceleration(
+            "pose", pose.A[6:], pose.b[6:], p["weight_pose"]
+        )
+        stiffness = p["trunk_stiffness"]
+        trunk = compute_tracking_objective(
+            model, q, v, q_rest, zero, zero, stiffness, critical_damping(stiffness, ratio), zero
+        )
+        objectives["trunk"] = layout.over_acceleration(
+            "trunk", trunk.A[3:6], trunk.b[3:6], p["weight_trunk"]
+        )
+        # Lowest level: the contact forces the levels above leave free (internal forces
+        # between the feet) are the smallest, as in the weighted controller's distribution.
+        objectives["forces"] = Objective(
+            "forces",
+            np.hstack([np.zeros((layout.nl, layout.nu + layout.nv)), np.eye(layout.nl)]),
+            np.zeros(layout.nl),
+            np.ones(layout.nl),
+        )
+        selection = np.asarray(p["torque_selection"])
+        objectives["torque"] = Objective(
+            "torque",
+            np.hstack(
+                [
+                    np.diag(np.sqrt(selection)),
+                    np.zeros((selection.size, layout.size - selection.size)),
+                ]
+            ),
+            np.zeros(selection.size),
+            np.full(selection.size, p["weight_torque"]) * (selection > 0),
+        )
+        self._desired = {
+            "linear_momentum_rate": mass * desired_com_acceleration,
+            "angular_momentum_rate": desired_rate,
+        }
+        return objectives
+
+    def _height_acceleration(
+        self, time_s: float, com: np.ndarray, com_velocity: np.ndarray
+    ) -> float:
+        """``z̈_d`` of `com_height`: target objective (eq. 6–7) while a change runs, else eq. 4."""
+        p = self._params
+        target = p["com_height"] + p["ground_height"]
+        if self._pending_height_change:
+            self._height_change = (float(com[2]), time_s)
+            self._pending_height_change = False
+        if self._height_change is not None:
+            remaining = p["com_height_duration_s"] - (time_s - self._height_change[1])
+            if remaining > 0.0:
+                return float(target_acceleration(com[2], com_velocity[2], target, 0.0, remaining))
+            self._height_change = None
+        stiffness = p["com_height_stiffness"]
+        return float(
+            setpoint_acceleration(
+                target,
+                com[2],
+                com_velocity[2],
+                stiffness,
+                critical_damping(stiffness, p["damping_ratio"]),
+            )
+        )
+
+    def _inequalities(
+        self, control_input: ControlInput, terms: DynamicsTerms, layout: _Layout
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of ``D x + f ≥ 0``: λ ≥ 0, non-penetration, torque and joint limits."""
+        n, nu, nv, nl = layout.size, layout.nu, layout.nv, layout.nl
+        blocks: list[tuple[np.ndarray, np.ndarray]] = []
+        # λ ≥ 0 (eq. 25).
+        if nl:
+            blocks.append((np.hstack([np.zeros((nl, nu + nv)), np.eye(nl)]), np.zeros(nl)))
+        if nl and self._params["non_penetration"]:
+            # Vᵀ (J_c q̈ + J̇_c q̇) ≥ 0 (eq. 26).
+            blocks.append(
+                (
+                    np.hstack([np.zeros((nl, nu)), layout.cone_jacobian, np.zeros((nl, nl))]),
+                    layout.cone_drift,
+                )
+            )
+        # −τ_max ≤ τ ≤ τ_max (§7.2).
+        limit = self.robot.torque_limit
+        bounded = np.flatnonzero(np.isfinite(limit))
+        if bounded.size:
+            rows = np.zeros((bounded.size, n))
+            rows[np.arange(bounded.size), bounded] = 1.0
+            blocks += [(-rows, limit[bounded]), (rows, limit[bounded])]
+        rows, offsets = _joint_limit_rows(self.robot, control_input.q, n, nu)
+        if len(offsets):
+            blocks.append((rows, offsets))
+        if not blocks:
+            return np.zeros((0, n)), np.zeros(0)
+        return np.vstack([b[0] for b in blocks]), np.concatenate([b[1] for b in blocks])
+
+    def _output(
+        self,
+        terms: DynamicsTerms,
+        layout: _Layout,
+        flags: tuple[bool, ...],
+        objectives: dict[str, Objective],
+        solution: PrioritizedSolution,
+    ) -> ControlOutput:
+        p, robot = self._params, self.robot
+        x = solution.x
+        torque_unclipped = x[: layout.nu]
+        torque = np.clip(torque_unclipped, -robot.torque_limit, robot.torque_limit)
+        forces = np.zeros((robot.num_contact_points, 3))
+        forces[layout.force_point_indices] = (layout.cone @ x[layout.nu + layout.nv :]).reshape(
+            -1, 3
+        )
+        counts = [len(c.points_in_frame) for c in robot.contacts]
+        wrenches = wrenches_from_point_forces(terms, forces, counts)
+        # The acceleration τ and f really produce (equal to x's q̈ when eq. 22 holds).
+        generalized = layout.S_T @ torque + layout.contact_force_map @ x[layout.nu + layout.nv :]
+        acceleration = np.linalg.solve(terms.mass_matrix, generalized - terms.bias_forces)
+        momentum = terms.momentum
+        cop, cmp_ = ground_reference_points(terms, wrenches, flags, p["ground_height"])
+        supporting = [
+            pts for pts, on in zip(terms.position_points_in_world, flags, strict=True) if on
+        ]
+        polygon = support_polygon(np.vstack(supporting)) if supporting else np.zeros((0, 2))
+        support_rows = [J for J, on in zip(terms.support_jacobians, flags, strict=True) if on]
+        support_drift = [a for a, on in zip(terms.support_drifts, flags, strict=True) if on]
+        constraint_residual = (
+            float(
+                np.linalg.norm(
+                    np.vstack(support_rows) @ acceleration + np.concatenate(support_drift)
+                )
+            )
+            if support_rows
+            else 0.0
+        )
+        diagnostics = {
+            "optimizer_ran": True,
+            "position_com_in_world": terms.position_com_in_world,
+            "velocity_com_in_world": momentum.linear_momentum / terms.total_mass,
+            "linear_momentum": momentum.linear_momentum,
+            "angular_momentum": momentum.angular_momentum,
+            "linear_momentum_rate_desired": self._desired["linear_momentum_rate"],
+            "linear_momentum_rate_achieved": momentum.R @ acceleration + momentum.r_bias,
+            "angular_momentum_rate_desired": self._desired["angular_momentum_rate"],
+            "angular_momentum_rate_achieved": momentum.S @ acceleration + momentum.s_bias,
+            "center_of_pressure": cop,
+            "centroidal_moment_pivot": cmp_,
+            "supports": list(flags),
+            "support_polygon_xy": polygon.reshape(-1),
+            "angular_momentum_weight": p["weight_angular_momentum"],
+            "objective_residuals": {name: o.residual(x) for name, o in objectives.items()},
+            "objective_condition_number": math.nan,
+            "schur_condition_number": math.nan,
+            "objective_damping": max((level.damping for level in solution.levels), default=0.0),
+            "constraint_damping": 0.0,
+            "constraint_residual": constraint_residual,
+            "root_wrench_residual": float(
+                np.linalg.norm(
+                    (objectives["dynamics"].A @ x - objectives["dynamics"].b)[:NUM_ROOT_DOFS]
+                )
+            ),
+            "saturated_joints": int(
+                np.count_nonzero(np.abs(torque_unclipped) >= robot.torque_limit * (1 - 1e-6))
+            ),
+            "priority_levels": [
+                {
+                    "objectives": list(level.names),
+                    "status": level.status,
+                    "residual": level.residual,
+                    "rank": level.rank,
+                    "null_space_dimension": level.null_space_dimension,
+                    "damping": level.damping,
+                    "used_qp": level.used_qp,
+                }
+                for level in solution.levels
+            ],
+            "inequality_violation": solution.inequality_violation,
+        }
+        return ControlOutput(
+            acceleration=acceleration,
+            joint_torque=torque,
+            contact_force_in_world=forces,
+            contact_wrench_in_world=wrenches,
+            diagnostics=diagnostics,
+        )
+
+
+class _Layout:
+    """Where ``τ``, ``q̈`` and ``λ`` sit in ``x`` this tick, and the contact maps.
+
+    Three sets of sole points:
+
+    * *planted*: every point of every contact the ``support_mask`` allows,
+      servoed to the ground by ``contact`` (Table 1: "keep feet planted"), so a
+      foot a push has lifted is brought back down;
+    * *supporting*: the points of the contacts the client reports as supports,
+      whose centroid and hull are the base of support of ``com``;
+    * *loaded*: supporting points within ``contact_distance`` of the ground,
+      the only ones carrying a force (a ``λ`` block) and a non-penetration row,
+      as de Lasa §4 enforces contact "for all contact points close to the
+      ground". A lifted heel is pulled down, not held by a force it cannot have.
+    """
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        terms: DynamicsTerms,
+        planted: Sequence[bool],
+        supports: Sequence[bool],
+        friction_coefficients: np.ndarray,
+        ground_height: float,
+        contact_distance: float,
+    ):
+        nv = robot.model.nv
+        self.nv, self.nu = nv, nv - NUM_ROOT_DOFS
+        owner = np.repeat(
+            np.arange(len(robot.contacts)), [len(c.points_in_frame) for c in robot.contacts]
+        )
+        positions = np.vstack(terms.position_points_in_world)
+        jacobian = np.vstack(terms.point_jacobians)
+        drift = np.concatenate(terms.point_drifts)
+        mus = np.asarray(friction_coefficients, dtype=float)[owner]
+
+        def rows(points: np.ndarray) -> np.ndarray:
+            return (3 * points[:, None] + np.arange(3)).reshape(-1)
+
+        planted_points = np.flatnonzero(np.asarray(planted)[owner])
+        #: Planted points: ``(3s, nv)`` Jacobian, ``(3s,)`` drift, ``(s, 3)`` positions.
+        self.point_jacobian = jacobian[rows(planted_points)]
+        self.point_drift = drift[rows(planted_points)]
+        self.point_positions = positions[planted_points]
+        supporting = np.flatnonzero(np.asarray(supports)[owner])
+        #: Supporting points' positions ``(k, 3)``: the base of support.
+        self.support_positions = positions[supporting]
+        self.smallest_friction_coefficient = float(mus[supporting].min(initial=math.inf))
+        loaded = supporting[positions[supporting, 2] <= ground_height + contact_distance]
+        #: Indices (over all the robot's contact points) of the points carrying force.
+        self.force_point_indices = loaded
+        force_jacobian = jacobian[rows(loaded)]
+        self.nl = 4 * loaded.size
+        #: ``(3p, 4p)`` block-diagonal V: point forces from λ (eq. 23).
+        self.cone = np.zeros((3 * loaded.size, self.nl))
+        for i, point in enumerate(loaded):
+            self.cone[3 * i : 3 * i + 3, 4 * i : 4 * i + 4] = friction_cone_basis(mus[point])
+        #: ``(4p, nv)`` and ``(4p,)``: ``Vᵀ J_c`` and ``Vᵀ J̇_c q̇`` of eq. 26.
+        self.cone_jacobian = self.cone.T @ force_jacobian
+        self.cone_drift = self.cone.T @ drift[rows(loaded)]
+        #: ``(nv, nλ)``: J_cᵀ V, generalized force of λ (eq. 24).
+        self.contact_force_map = force_jacobian.T @ self.cone
+        #: ``(nv, nu)``: Sᵀ, actuated torques into generalized forces.
+        self.S_T = np.vstack([np.zeros((NUM_ROOT_DOFS, self.nu)), np.eye(self.nu)])
+        self.size = self.nu + nv + self.nl
+
+    def over_acceleration(
+        self,
+        name: str,
+        A: np.ndarray,
+        b: np.ndarray,
+        weight: float,
+        row_weights: np.ndarray | None = None,
+    ) -> Objective:
+        """An objective on ``q̈`` written over ``x = [τ, q̈, λ]``."""
+        rows = A.shape[0]
+        full = np.zeros((rows, self.size))
+        full[:, self.nu : self.nu + self.nv] = A
+        weights = np.full(rows, weight) if row_weights is None else weight * row_weights
+        return Objective(name, full, b, weights)
+
+
+def _normalized(level: list[Objective]) -> list[Objective]:
+    """The level scaled to unit Frobenius norm ``‖W^½ A‖_F = 1`` (same minimizers).
+
+    The levels come in their own units (N for the equations of motion, m/s²
+    for features, kg·m²/s² per kg for momentum); scaled alike, one gain bound
+    ``B`` is a bound on each level's condition (σ < σ_max / B, within
+    ``√rank``, is singular) rather than on singular values in mixed units.
+    """
+    scale = math.sqrt(sum(float(np.sum(o.weight[:, None] * o.A**2)) for o in level))
+    if not scale > 0.0:
+        return level
+    return [Objective(o.name, o.A, o.b, o.weight / scale**2) for o in level]
+
+
+def _joint_limit_rows(
+    robot: RobotModel, q: np.ndarray, size: int, nu: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """``±q̈_i ≥ 0`` for 1-DoF joints at or past a limit (de Lasa eq. 27).
+
+    The paper adds a limit "contact" force ``λ_lim`` per such joint; our
+    simulators model no joint stop that would supply it, so only its
+    non-penetration half is kept: a joint at its lower limit may not
+    accelerate further down, at its upper limit not further up. Ball joints
+    have no scalar range and are left to the rest pose.
+    """
+    model = robot.model
+    rows, offsets = [], []
+    for joint in model.joints[2:]:
+        if joint.nq != 1:
+            continue
+        value = q[joint.idx_q]
+        lower, upper = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+        sign = 1.0 if value <= lower else -1.0 if value >= upper else 0.0
+        if sign:
+            row = np.zeros(size)
+            row[nu + joint.idx_v] = sign
+            rows.append(row)
+            offsets.append(0.0)
+    if not rows:
+        return np.zeros((0, size)), np.zeros(0)
+    return np.array(rows), np.array(offsets)
