@@ -1,0 +1,233 @@
+"""The prioritized controller (de Lasa 2010) on seeded states of every built-in model."""
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from controller_server.controllers import ControlInput, create_controller
+from controller_server.controllers.prioritized import friction_cone_basis
+from controller_server.errors import InvalidParams
+from controller_server.features.setpoint import target_acceleration
+from controller_server.models import BUILTIN_MODELS, load_robot_model
+
+MODEL_NAMES = tuple(BUILTIN_MODELS)
+HIGHER_LEVEL_OBJECTIVES = ("dynamics", "contact", "com", "com_height", "trunk")
+"""Objectives above `pose` (priority 3) with the default priorities."""
+
+
+def near_standing_state(robot, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Standing pose with every joint turned by up to 0.2 rad, small random velocities."""
+    rng = np.random.default_rng(seed)
+    model = robot.model
+    q = pin.neutral(model)
+    q[:3] = robot.standing_position_base_in_world
+    q = pin.integrate(model, q, np.concatenate([np.zeros(6), rng.uniform(-0.2, 0.2, model.nv - 6)]))
+    return q, rng.normal(0.0, 0.3, model.nv)
+
+
+def compute(robot, q, v, params=None, flags=None):
+    controller = create_controller(
+        "prioritized", robot, {"contact_distance": 1.0, **(params or {})}
+    )
+    flags = flags or (True,) * len(robot.contacts)
+    return controller.compute(ControlInput(0.0, q, v, flags))
+
+
+@pytest.fixture(scope="module", params=MODEL_NAMES)
+def robot(request):
+    return load_robot_model(request.param)
+
+
+def check_physics(robot, output):
+    """Dynamics residual, λ ≥ 0 / non-penetration, friction pyramid and torque limits."""
+    diagnostics = output.diagnostics
+    assert diagnostics["objective_residuals"]["dynamics"] < 1e-6
+    assert diagnostics["inequality_violation"] < 1e-7
+    forces = output.contact_force_in_world
+    assert np.all(forces[:, 2] >= -1e-7)
+    mus = np.concatenate(
+        [[c.friction_coefficient] * len(c.points_in_frame) for c in robot.contacts]
+    )
+    grip = mus / math.sqrt(2.0) * forces[:, 2] + 1e-6
+    assert np.all(np.abs(forces[:, 0]) <= grip) and np.all(np.abs(forces[:, 1]) <= grip)
+    assert np.all(np.abs(output.joint_torque) <= robot.torque_limit * (1 + 1e-9))
+    # The returned q̈ is what τ and the contact forces produce (eq. 22).
+    data = robot.model.createData()
+    return data
+
+
+@settings(
+    max_examples=6,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_lower_objectives_never_raise_higher_residuals(robot, seed):
+    """Priority property: adding or re-weighting a level-3 objective leaves levels 0–2 alone."""
+    q, v = near_standing_state(robot, seed)
+    base = compute(robot, q, v)
+    check_physics(robot, base)
+    variants = [
+        {"weight_pose": 25.0},
+        {"weight_angular_momentum": 0.0},
+        {"torque_selection": [1.0] * robot.nv_joints, "weight_torque": 3.0},
+        {"reference_angular_momentum": [5.0, -3.0, 1.0]},
+    ]
+    before = base.diagnostics["objective_residuals"]
+    for params in variants:
+        output = compute(robot, q, v, params)
+        check_physics(robot, output)
+        after = output.diagnostics["objective_residuals"]
+        for name in HIGHER_LEVEL_OBJECTIVES:
+            if name in before:
+                scale = max(1.0, before[name])
+                assert abs(after[name] - before[name]) <= 1e-8 * scale, (name, params)
+
+
+def test_returned_acceleration_is_what_the_torques_and_forces_produce(robot):
+    q, v = near_standing_state(robot, 7)
+    output = compute(robot, q, v)
+    model, data = robot.model, robot.model.createData()
+    counts = [len(c.points_in_frame) for c in robot.contacts]
+    generalized = np.concatenate([np.zeros(6), output.joint_torque])
+    pin.computeJointJacobians(model, data, q)
+    pin.framesForwardKinematics(model, data, q)
+    start = 0
+    for contact, count in zip(robot.contacts, counts, strict=True):
+        J = pin.getFrameJacobian(
+            model, data, contact.frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        )
+        rotation = data.oMf[contact.frame_id].rotation
+        for point, force in zip(
+            contact.points_in_frame,
+            output.contact_force_in_world[start : start + count],
+            strict=True,
+        ):
+            offset = rotation @ point
+            J_point = J[:3] - pin.skew(offset) @ J[3:]
+            generalized += J_point.T @ force
+        start += count
+    # Pinocchio's own forward dynamics (ABA) with those generalized forces.
+    expected = pin.aba(model, data, q, v, generalized)
+    np.testing.assert_allclose(
+        output.acceleration, expected, atol=1e-6 * (1 + np.abs(expected).max())
+    )
+
+
+def test_a_fighting_objective_degrades_only_itself_when_prioritized():
+    """de Lasa §3.2: weighted objectives fight; prioritized, the lower one gives way.
+
+    A rest pose bending the hips forward moves the CM off the feet, against
+    `com`. With `pose` below `com` (Table 1), the CM objective is met as
+    without the bad pose; with both in one level (a weighted combination,
+    eq. 16) the CM objective is given up in part.
+    """
+    robot = load_robot_model("revolute_humanoid")
+    q, v = near_standing_state(robot, 3)
+    leaning = pin.neutral(robot.model)[7:]
+    names = [j.name for j in robot.joints]
+    for i, name in enumerate(names):
+        if name.endswith("hip_pitch"):
+            leaning[i] = -0.8
+    assert np.any(leaning != 0.0), names
+    reference = compute(robot, q, v)
+    prioritized = compute(
+        robot, q, v, {"reference_joint_position": list(leaning), "weight_pose": 50.0}
+    )
+    weighted = compute(
+        robot,
+        q,
+        v,
+        {"reference_joint_position": list(leaning), "weight_pose": 50.0, "priority_pose": 2},
+    )
+    com = {
+        key: out.diagnostics["objective_residuals"]["com"]
+        for key, out in (
+            ("reference", reference),
+            ("prioritized", prioritized),
+            ("weighted", weighted),
+        )
+    }
+    pose = {
+        key: out.diagnostics["objective_residuals"]["pose"]
+        for key, out in (
+            ("reference", reference),
+            ("prioritized", prioritized),
+            ("weighted", weighted),
+        )
+    }
+    assert com["prioritized"] == pytest.approx(com["reference"], abs=1e-8)
+    assert com["weighted"] > com["prioritized"] + 1e-3
+    assert pose["prioritized"] > pose["reference"]  # the fighting objective pays
+
+
+def test_levels_are_reported_every_tick(robot):
+    q, v = near_standing_state(robot, 11)
+    levels = compute(robot, q, v).diagnostics["priority_levels"]
+    assert levels[0]["objectives"] == ["dynamics"]
+    assert levels[-1]["objectives"] == ["forces"]
+    assert [level["objectives"] for level in levels[1:-1]] == [
+        ["contact"],
+        ["com", "com_height", "trunk"],
+        ["angular_momentum", "pose"],
+    ]
+    assert all(level["status"] in ("solved", "not reached") for level in levels)
+    assert levels[0]["rank"] == robot.model.nv  # the equations of motion: full row rank
+
+
+def test_priorities_and_weights_change_at_run_time():
+    robot = load_robot_model("thesis_humanoid")
+    controller = create_controller("prioritized", robot)
+    controller.set_params({"priority_angular_momentum": 2, "weight_pose": 0.0})
+    q, v = near_standing_state(robot, 5)
+    levels = controller.compute(ControlInput(0.0, q, v, (True, True))).diagnostics[
+        "priority_levels"
+    ]
+    assert {"com", "com_height", "trunk", "angular_momentum"} in [
+        set(lv["objectives"]) for lv in levels
+    ]
+    assert not any("pose" in lv["objectives"] for lv in levels)
+    for bad in ({"priority_pose": 0}, {"priority_pose": 1.5}, {"weight_com": -1.0}):
+        with pytest.raises(InvalidParams):
+            controller.set_params(bad)
+
+
+def test_friction_cone_basis_spans_the_inscribed_pyramid():
+    mu = 0.6
+    V = friction_cone_basis(mu)
+    np.testing.assert_allclose(np.linalg.norm(V, axis=0), 1.0)
+    # Every edge is on Coulomb's cone; every non-negative combination is in the pyramid.
+    np.testing.assert_allclose(np.hypot(V[0], V[1]), mu * V[2])
+    rng = np.random.default_rng(0)
+    forces = V @ rng.uniform(0, 1, (4, 200))
+    assert np.all(np.abs(forces[:2]) <= mu / math.sqrt(2) * forces[2] + 1e-12)
+
+
+@pytest.mark.parametrize("duration_s", [0.3, 1.0, 2.5])
+def test_target_objective_reaches_the_target(duration_s):
+    """Integrating eq. 6 with a, b from eq. 7 lands on (y_T, ẏ_T) at T."""
+    y0, v0, yT, vT = 0.9, 0.2, 0.7, -0.1
+    steps = 20000
+    dt = duration_s / steps
+    y, rate = y0, v0
+    for i in range(steps):
+        remaining = duration_s - i * dt
+        acceleration = target_acceleration(y, rate, yT, vT, remaining, gain_bound=1e9)
+        rate += acceleration * dt
+        y += rate * dt
+    assert y == pytest.approx(yT, abs=2e-3)
+    assert rate == pytest.approx(vT, abs=2e-2)
+
+
+def test_target_objective_is_bounded_as_the_time_runs_out():
+    accelerations = [
+        abs(float(target_acceleration(0.0, 0.0, 0.1, 0.0, T, gain_bound=100.0)))
+        for T in np.geomspace(1.0, 1e-6, 200)
+    ]
+    assert max(accelerations) <= 100.0 * math.hypot(0.1, 0.0) * (1 + 1e-9)
+    assert accelerations[-1] < 1e-3  # σ → 0: the damped solution goes to zero (eq. 19)
