@@ -47,7 +47,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _sim(args: argparse.Namespace) -> int:
-    from clients.sim.app import ABLATIONS, run_scenarios, server_endpoint, sweep_push
+    from clients.sim.app import SWEEP_CONTROLLERS, run_scenarios, server_endpoint, sweep_push
     from clients.sim.scenario import PushSpec, load_scenario
 
     overrides = {}
@@ -65,8 +65,8 @@ def _sim(args: argparse.Namespace) -> int:
         duration_s=args.push_duration,
     )
     with server_endpoint(args.connect) as endpoint:
-        for label, params in ABLATIONS.items():
-            base = load_scenario(args.scenarios[0], **overrides)
+        for label, (controller, params) in SWEEP_CONTROLLERS.items():
+            base = load_scenario(args.scenarios[0], **{**overrides, "controller": controller})
             base = base.model_copy(update={"params": {**base.params, **params}, "pushes": []})
             force_N = sweep_push(base, push, endpoint)
             print(f"{label:<32} survives {force_N:7.1f} N = {force_N * push.duration_s:6.1f} N·s")
@@ -129,7 +129,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--sweep-push",
         action="store_true",
-        help="find by bisection the largest push each thesis ablation survives (first scenario)",
+        help="find by bisection the largest push each thesis ablation and the prioritized "
+        "controller survive (first scenario)",
     )
     sim.add_argument("--push-body", default="chest", help="body pushed in the sweep")
     sim.add_argument(

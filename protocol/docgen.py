@@ -20,6 +20,7 @@ from protocol.messages import (
     ContactSpec,
     Diagnostics,
     JointInfo,
+    PriorityLevelReport,
     SessionStats,
 )
 
@@ -105,7 +106,7 @@ def render_protocol_doc() -> str:
     sections = [INTRO]
     for kind, cls in MESSAGE_TYPES.items():
         sections.append(f"## `{kind}`\n\n{(cls.__doc__ or '').strip()}\n\n{_table(cls)}\n")
-    for part in (ContactSpec, JointInfo, Diagnostics, SessionStats):
+    for part in (ContactSpec, JointInfo, Diagnostics, PriorityLevelReport, SessionStats):
         sections.append(f"## {part.__name__}\n\n{(part.__doc__ or '').strip()}\n\n{_table(part)}\n")
     errors = ["| code | name | meaning |", "|---|---|---|"]
     errors += [f"| {int(c)} | `{c.name}` | {c.description} |" for c in ErrorCode]

@@ -222,7 +222,10 @@ class PriorityLevelReport(_Strict):
         "`solved`, `infeasible` (the QP had no solution: the levels above are returned), "
         "`not reached` (no freedom left, or after an infeasible level) or `empty`."
     )
-    residual: float = wire_field("‖W^½ (A x − b)‖ of the level at the returned x.")
+    residual: float = wire_field(
+        "‖W^½ (A x − b)‖ at the returned x, the level scaled to ‖W^½ A‖_F = 1 "
+        "(per objective, in its own units: `objective_residuals`)."
+    )
     rank: int = wire_field("Directions of A C̄ this level used (σ ≥ 1/B).")
     null_space_dimension: int = wire_field("Freedom left to the levels below.")
     damping: float = wire_field("Damping λ of the level's solve (Maciejewski eq. 15).")
@@ -293,10 +296,12 @@ class Diagnostics(_Strict):
         "Per objective, the weighted residual ‖W (A q̈ − b)‖ at the returned q̈."
     )
     objective_condition_number: float = wire_field(
-        "Condition number of the damped objective Hessian M (App. D).", unit="1"
+        "Condition number of the damped objective Hessian M (App. D); NaN for `prioritized`.",
+        unit="1",
     )
     schur_condition_number: float = wire_field(
-        "Condition number of C M⁻¹ Cᵀ before damping (App. D, eq. D.7).", unit="1"
+        "Condition number of C M⁻¹ Cᵀ before damping (App. D, eq. D.7); NaN for `prioritized`.",
+        unit="1",
     )
     objective_damping: float = wire_field("Damping λ on the objective stack (Maciejewski eq. 15).")
     constraint_damping: float = wire_field(

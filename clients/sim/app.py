@@ -15,7 +15,7 @@ from clients.sim.plots import plot_run
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import PushSpec, Scenario, load_scenario
 
-__all__ = ["ABLATIONS", "run_scenarios", "server_endpoint", "sweep_push"]
+__all__ = ["ABLATIONS", "SWEEP_CONTROLLERS", "run_scenarios", "server_endpoint", "sweep_push"]
 
 ANGULAR_OFF: dict[str, Any] = {"angular_momentum_gain": 0.0, "weight_angular_momentum": 0.0}
 ABLATIONS: dict[str, dict[str, Any]] = {
@@ -24,6 +24,11 @@ ABLATIONS: dict[str, dict[str, Any]] = {
     "+ linear and angular momentum": {},
 }
 """Thesis ch. 7.1 ablations of the momentum controller, as parameter overrides."""
+SWEEP_CONTROLLERS: dict[str, tuple[str, dict[str, Any]]] = {
+    **{label: ("momentum", params) for label, params in ABLATIONS.items()},
+    "prioritized (de Lasa 2010)": ("prioritized", {}),
+}
+"""What ``poise sim --sweep-push`` compares: label → (controller, parameter overrides)."""
 
 
 def _progress_bar(label: str) -> Callable[[float], None]:

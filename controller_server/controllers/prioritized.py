@@ -7,17 +7,23 @@ solved by Algorithm 1 (:func:`controller_server.solvers.solve_prioritized`):
 
 0. equations of motion ``‖Sᵀ τ − M q̈ + J_cᵀ V λ − h‖²`` (eq. 22–24), as the
    top-priority objective §8.2 recommends instead of a hard equality;
-1. ``contact``: setpoints on the sole points of the supporting feet, toward
-   their projections on the ground (Table 1, §4);
-2. ``com``: the CM over the centroid of the support points, and
-   ``com_height``: its height (a target objective, eq. 6–7, while a new
-   height is being reached; a setpoint otherwise);
-3. ``angular_momentum``: ``L̇_d = k_p (L_r − L)`` (eq. 8–9), ``pose``: rest
-   pose (§4), ``torque``: minimum torque on selected joints (eq. 15);
-4. ``forces``: ``‖λ‖²``, below everything. The rest pose fixes ``q̈`` but not
-   the internal forces between two feet, which would otherwise be whatever
-   the QP solver returns (torques chattering to their limits); this picks
-   the smallest, as the weighted controller's distribution does.
+1. ``contact``: setpoints on the sole points, toward their projections on
+   the ground (Table 1, §4);
+2. ``com``: the CM over the centroid of the support points,
+   ``angular_momentum``: ``L̇_d = k_p (L_r − L)`` (eq. 8–9), ``trunk``: the
+   root upright, ``pose``: rest pose of the joints (§4);
+3. ``com_height``: the CM height (a target objective, eq. 6–7, while a new
+   height is being reached; a setpoint otherwise), ``torque``: minimum
+   torque on selected joints (eq. 15);
+4. ``forces``: ``‖λ‖²``, below everything (not a parameter). The rest pose
+   fixes ``q̈`` but not the internal forces between two feet, which would
+   otherwise be whatever the QP solver returns (torques chattering to their
+   limits); this picks the smallest, as the weighted controller's
+   distribution does.
+
+These default priorities differ from Table 1; see :data:`OBJECTIVES` for
+why. Each level is scaled to unit norm before the solve (:func:`_normalized`),
+so that one gain bound means the same in every level.
 
 Priorities and weights (eq. 37) of every objective, and its gains and
 references, change at run time through ``set_params``. Inequalities
@@ -69,16 +75,29 @@ __all__ = ["OBJECTIVES", "PrioritizedController", "friction_cone_basis"]
 
 NUM_ROOT_DOFS = 6
 
-OBJECTIVES: dict[str, tuple[int, str]] = {
-    "contact": (1, "sole points of the supports toward the ground (Table 1)"),
-    "com": (2, "CM over the centroid of the support points (Table 1, E_com∥)"),
-    "com_height": (2, "CM height (Table 1, E_com⊥)"),
-    "angular_momentum": (3, "L̇_d = k_p (L_r − L) (eq. 8–9)"),
-    "trunk": (2, "root (pelvis) orientation upright (cf. E_trunk of Table 2)"),
-    "pose": (3, "rest pose of the joints (§4, E_pose)"),
-    "torque": (3, "minimum torque on `torque_selection` (eq. 15)"),
+OBJECTIVES: dict[str, tuple[int, float, str]] = {
+    "contact": (1, 1.0, "sole points toward the ground (Table 1)"),
+    "com": (2, 10.0, "CM over the centroid of the support points (Table 1, E_com∥)"),
+    "angular_momentum": (2, 10.0, "L̇_d = k_p (L_r − L) (eq. 8–9; Table 1: priority 3)"),
+    "trunk": (2, 1.0, "root (pelvis) orientation upright (cf. E_trunk of Table 2)"),
+    "pose": (2, 1.0, "rest pose of the joints (§4, E_pose; Table 1: priority 3)"),
+    "com_height": (3, 1.0, "CM height (Table 1, E_com⊥: priority 2)"),
+    "torque": (3, 1.0, "minimum torque on `torque_selection` (eq. 15)"),
 }
-"""Objective name → (default priority of Table 1, role)."""
+"""Objective name → (default priority, default weight α, role).
+
+Table 1's order (contact; CM and CM height; angular momentum and rest
+pose) is one ``set_params`` away, but it is not the default, because the
+thesis humanoid falls under the thesis pushes with it (measured, see the
+README): a CM objective strictly above the angular momentum takes all of
+the centre of pressure's authority to stop the CM, and the body pitches
+with nothing left to damp its rotation; and the CM height of a body
+standing on straight knees is a singular feature that, ranked above the
+rest pose, folds the legs. So the centroidal momentum (linear and angular,
+driven by the same ground wrench) is one level, weighted as the weighted
+controller weights it (α = 10 each against 1 for the pose), under the
+contacts; the CM height ranks below it.
+"""
 
 
 def friction_cone_basis(friction_coefficient: float) -> np.ndarray:
@@ -94,7 +113,7 @@ def friction_cone_basis(friction_coefficient: float) -> np.ndarray:
 
 
 def _priority_spec(name: str) -> ParamSpec:
-    default, role = OBJECTIVES[name]
+    default, _, role = OBJECTIVES[name]
     return ParamSpec(
         default, kind="int", minimum=1, maximum=10, doc=f"priority level of `{name}`: {role}"
     )
@@ -102,7 +121,10 @@ def _priority_spec(name: str) -> ParamSpec:
 
 def _weight_spec(name: str) -> ParamSpec:
     return ParamSpec(
-        1.0, minimum=0.0, maximum=1e6, doc=f"α of `{name}` within its level (eq. 37); 0 = off"
+        OBJECTIVES[name][1],
+        minimum=0.0,
+        maximum=1e6,
+        doc=f"α of `{name}` within its level (eq. 37); 0 = off",
     )
 
 
@@ -588,10 +610,13 @@ class _Layout:
       foot a push has lifted is brought back down;
     * *supporting*: the points of the contacts the client reports as supports,
       whose centroid and hull are the base of support of ``com``;
-    * *loaded*: supporting points within ``contact_distance`` of the ground,
-      the only ones carrying a force (a ``λ`` block) and a non-penetration row,
-      as de Lasa §4 enforces contact "for all contact points close to the
-      ground". A lifted heel is pulled down, not held by a force it cannot have.
+    * *loaded*: planted points within ``contact_distance`` of the ground, the
+      only ones carrying a force (a ``λ`` block) and a non-penetration row, as
+      de Lasa §4 enforces contact "for all contact points close to the
+      ground". A lifted heel is pulled down, not held by a force it cannot
+      have; a foot set back down carries weight at once, whatever the
+      client's flags (a client that flags only loaded feet would otherwise
+      never see it loaded).
     """
 
     def __init__(
@@ -626,7 +651,8 @@ class _Layout:
         #: Supporting points' positions ``(k, 3)``: the base of support.
         self.support_positions = positions[supporting]
         self.smallest_friction_coefficient = float(mus[supporting].min(initial=math.inf))
-        loaded = supporting[positions[supporting, 2] <= ground_height + contact_distance]
+        near = positions[planted_points, 2] <= ground_height + contact_distance
+        loaded = planted_points[near]
         #: Indices (over all the robot's contact points) of the points carrying force.
         self.force_point_indices = loaded
         force_jacobian = jacobian[rows(loaded)]

@@ -59,12 +59,13 @@ Hessian is the diagonal ``σᵢ² + λᵢ²`` (λ = 1/(2B) for the weak directio
 σ < 1/(2B)), and ``(10⁻⁶ σ_max)²`` in the directions without gain (σ = 0
 or at the rounding floor): strictly convex, but negligible against the
 level's own residual, so an active inequality is met by moving along the
-null space rather than by giving up part of the level. Below the first level ``w = 0`` is feasible; violations
-already accepted there may persist but not grow, so the QP starts exactly
-feasible. Solver failures (an exception, no solution, non-finite output)
-and solutions violating ``D x + f ≥ 0`` by more than the feasibility
-tolerance count as infeasible (Algorithm 1, line 7); below the first level
-with rows that can only be a solver failure.
+null space rather than by giving up part of the level. Below the first
+level ``w = 0`` is feasible; violations already accepted there may persist
+but not grow, so the QP starts exactly feasible. Solver failures (an
+exception, no solution, non-finite output) and solutions violating
+``D x + f ≥ 0`` by more than the feasibility tolerance count as infeasible
+(Algorithm 1, line 7); below the first level that can only be a solver
+failure.
 
 The QP is ill-conditioned by design (curvature ratio up to
 ``(2 B σ_max)² ≈ 10¹⁶``) and lower levels often sit at degenerate vertices

@@ -15,8 +15,36 @@ from controller_server.features.setpoint import target_acceleration
 from controller_server.models import BUILTIN_MODELS, load_robot_model
 
 MODEL_NAMES = tuple(BUILTIN_MODELS)
-HIGHER_LEVEL_OBJECTIVES = ("dynamics", "contact", "com", "com_height", "trunk")
-"""Objectives above `pose` (priority 3) with the default priorities."""
+TABLE_1 = {
+    "priority_com_height": 2,
+    "priority_angular_momentum": 3,
+    "priority_pose": 3,
+    "weight_com": 1.0,
+    "weight_angular_momentum": 1.0,
+}
+"""de Lasa's Table 1 order (the default puts the momentum and pose in one level)."""
+CONFIGURATIONS = {
+    "default": (
+        {},
+        ("dynamics", "contact", "com", "angular_momentum", "pose", "trunk"),
+        [
+            {"weight_com_height": 25.0},
+            {"com_height": 0.8},
+            {"torque_selection": "ones", "weight_torque": 3.0},
+        ],
+    ),
+    "table 1": (
+        TABLE_1,
+        ("dynamics", "contact", "com", "com_height", "trunk"),
+        [
+            {"weight_pose": 25.0},
+            {"weight_angular_momentum": 0.0},
+            {"reference_angular_momentum": [5.0, -3.0, 1.0]},
+            {"torque_selection": "ones", "weight_torque": 3.0},
+        ],
+    ),
+}
+"""Configuration → (parameters, objectives above the lowest level, changes to that level)."""
 
 
 def near_standing_state(robot, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -61,32 +89,28 @@ def check_physics(robot, output):
 
 
 @settings(
-    max_examples=6,
+    max_examples=5,
     deadline=None,
     derandomize=True,
     suppress_health_check=[HealthCheck.function_scoped_fixture],
 )
-@given(seed=st.integers(0, 2**31 - 1))
-def test_lower_objectives_never_raise_higher_residuals(robot, seed):
+@given(seed=st.integers(0, 2**31 - 1), configuration=st.sampled_from(sorted(CONFIGURATIONS)))
+def test_lower_objectives_never_raise_higher_residuals(robot, seed, configuration):
     """Priority property: adding or re-weighting a level-3 objective leaves levels 0–2 alone."""
+    params, higher, variants = CONFIGURATIONS[configuration]
     q, v = near_standing_state(robot, seed)
-    base = compute(robot, q, v)
+    base = compute(robot, q, v, params)
     check_physics(robot, base)
-    variants = [
-        {"weight_pose": 25.0},
-        {"weight_angular_momentum": 0.0},
-        {"torque_selection": [1.0] * robot.nv_joints, "weight_torque": 3.0},
-        {"reference_angular_momentum": [5.0, -3.0, 1.0]},
-    ]
     before = base.diagnostics["objective_residuals"]
-    for params in variants:
-        output = compute(robot, q, v, params)
+    for change in variants:
+        if change.get("torque_selection") == "ones":
+            change = {**change, "torque_selection": [1.0] * robot.nv_joints}
+        output = compute(robot, q, v, {**params, **change})
         check_physics(robot, output)
         after = output.diagnostics["objective_residuals"]
-        for name in HIGHER_LEVEL_OBJECTIVES:
-            if name in before:
-                scale = max(1.0, before[name])
-                assert abs(after[name] - before[name]) <= 1e-8 * scale, (name, params)
+        for name in higher:
+            scale = max(1.0, before[name])
+            assert abs(after[name] - before[name]) <= 1e-8 * scale, (name, change)
 
 
 def test_returned_acceleration_is_what_the_torques_and_forces_produce(robot):
@@ -135,9 +159,12 @@ def test_a_fighting_objective_degrades_only_itself_when_prioritized():
         if name.endswith("hip_pitch"):
             leaning[i] = -0.8
     assert np.any(leaning != 0.0), names
-    reference = compute(robot, q, v)
+    reference = compute(robot, q, v, {"priority_pose": 3})
     prioritized = compute(
-        robot, q, v, {"reference_joint_position": list(leaning), "weight_pose": 50.0}
+        robot,
+        q,
+        v,
+        {"reference_joint_position": list(leaning), "weight_pose": 50.0, "priority_pose": 3},
     )
     weighted = compute(
         robot,
@@ -161,8 +188,12 @@ def test_a_fighting_objective_degrades_only_itself_when_prioritized():
             ("weighted", weighted),
         )
     }
-    assert com["prioritized"] == pytest.approx(com["reference"], abs=1e-8)
-    assert com["weighted"] > com["prioritized"] + 1e-3
+    # Weighted, the CM gives way; prioritized, it moves only within the weak directions the
+    # CM level passes down (σ < σ_max / B, damped), a hundred times less.
+    assert abs(com["weighted"] - com["reference"]) > 1e-3
+    assert abs(com["prioritized"] - com["reference"]) < 1e-2 * abs(
+        com["weighted"] - com["reference"]
+    )
     assert pose["prioritized"] > pose["reference"]  # the fighting objective pays
 
 
@@ -173,8 +204,8 @@ def test_levels_are_reported_every_tick(robot):
     assert levels[-1]["objectives"] == ["forces"]
     assert [level["objectives"] for level in levels[1:-1]] == [
         ["contact"],
-        ["com", "com_height", "trunk"],
-        ["angular_momentum", "pose"],
+        ["com", "angular_momentum", "pose", "trunk"],
+        ["com_height"],
     ]
     assert all(level["status"] in ("solved", "not reached") for level in levels)
     assert levels[0]["rank"] == robot.model.nv  # the equations of motion: full row rank
@@ -183,14 +214,12 @@ def test_levels_are_reported_every_tick(robot):
 def test_priorities_and_weights_change_at_run_time():
     robot = load_robot_model("thesis_humanoid")
     controller = create_controller("prioritized", robot)
-    controller.set_params({"priority_angular_momentum": 2, "weight_pose": 0.0})
+    controller.set_params({"priority_angular_momentum": 3, "weight_pose": 0.0})
     q, v = near_standing_state(robot, 5)
     levels = controller.compute(ControlInput(0.0, q, v, (True, True))).diagnostics[
         "priority_levels"
     ]
-    assert {"com", "com_height", "trunk", "angular_momentum"} in [
-        set(lv["objectives"]) for lv in levels
-    ]
+    assert {"com_height", "angular_momentum"} in [set(lv["objectives"]) for lv in levels]
     assert not any("pose" in lv["objectives"] for lv in levels)
     for bad in ({"priority_pose": 0}, {"priority_pose": 1.5}, {"weight_com": -1.0}):
         with pytest.raises(InvalidParams):
