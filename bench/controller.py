@@ -43,7 +43,7 @@ def main() -> None:
     parser.add_argument("--ticks", type=int, default=1000)
     args = parser.parse_args()
     rng = np.random.default_rng(0)
-    header = f"{'model':<19}{'nv':>4}{'controller':>11}{'p50 µs':>9}{'p99 µs':>9}"
+    header = f"{'model':<19}{'nv':>4}{'controller':>12}{'p50 µs':>9}{'p99 µs':>9}"
     header += f"{'base p50':>10}{'base p99':>10}{'p50 ratio':>11}{'p99 ratio':>11}"
     print(header)
     for name in BUILTIN_MODELS:
@@ -76,7 +76,7 @@ def main() -> None:
             p50, p99 = percentiles(times[10:])
             ratios = f"{p50 / base50:>10.1f}x{p99 / base99:>10.1f}x"
             print(
-                f"{name:<19}{model.nv:>4}{controller_name:>11}{p50 * 1e6:>9.0f}{p99 * 1e6:>9.0f}"
+                f"{name:<19}{model.nv:>4}{controller_name:>12}{p50 * 1e6:>9.0f}{p99 * 1e6:>9.0f}"
                 f"{base50 * 1e6:>10.0f}{base99 * 1e6:>10.0f}{ratios}"
             )
 
