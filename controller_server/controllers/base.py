@@ -22,6 +22,7 @@ from controller_server.errors import InvalidParams
 from controller_server.models import RobotModel
 
 __all__ = [
+    "CONTACT_PARAMETERS",
     "ControlInput",
     "ControlOutput",
     "Controller",
@@ -82,6 +83,27 @@ class ParamSpec:
     doc: str = ""
 
 
+CONTACT_PARAMETERS: dict[str, ParamSpec] = {
+    "ground_height": ParamSpec(0.0, minimum=-1e3, maximum=1e3, doc="ground plane z (m)"),
+    "friction_coefficients": ParamSpec(
+        None,
+        kind="vector",
+        minimum=0.0,
+        maximum=10.0,
+        doc="Coulomb μ per contact (welcome order); default the model's contacts' μ",
+    ),
+    "support_mask": ParamSpec(
+        None,
+        kind="vector",
+        minimum=0.0,
+        maximum=1.0,
+        doc="per contact (welcome order), 0 = never a support even when touching "
+        "(lift a foot: single-support motions); default all 1",
+    ),
+}
+"""The ground and the contacts, the same for every controller."""
+
+
 @dataclass(frozen=True)
 class ControlInput:
     """One tick's state, in Pinocchio's conventions.
@@ -133,7 +155,19 @@ class Controller(ABC):
         self.set_params(params or {})
 
     def default_value(self, key: str) -> Any:
-        """Default of a parameter; override for model-dependent defaults."""
+        """Default of a parameter; model-dependent ones are derived from the robot.
+
+        Shared model-dependent defaults: the neutral pose for
+        ``reference_joint_position``, all ones for ``support_mask``, the
+        model's μ for ``friction_coefficients``. Override for others.
+        """
+        robot = self.robot
+        if key == "reference_joint_position":
+            return pin.neutral(robot.model)[7:]
+        if key == "support_mask":
+            return np.ones(len(robot.contacts))
+        if key == "friction_coefficients":
+            return np.array([c.friction_coefficient for c in robot.contacts])
         return self.PARAMETERS[key].default
 
     def parameters(self) -> dict[str, Any]:

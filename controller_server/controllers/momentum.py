@@ -35,6 +35,7 @@ from controller_server.balance_points import (
 )
 from controller_server.constraints import compute_support_equalities
 from controller_server.controllers.base import (
+    CONTACT_PARAMETERS,
     ControlInput,
     Controller,
     ControlOutput,
@@ -160,22 +161,7 @@ class MomentumController(Controller):
             choices=("distributed", "measured"),
             doc="inverse dynamics with distributed forces, or the state's measured wrenches",
         ),
-        "ground_height": ParamSpec(0.0, minimum=-1e3, maximum=1e3, doc="ground plane z (m)"),
-        "friction_coefficients": ParamSpec(
-            None,
-            kind="vector",
-            minimum=0.0,
-            maximum=10.0,
-            doc="Coulomb μ per contact (welcome order); default the model's contacts' μ",
-        ),
-        "support_mask": ParamSpec(
-            None,
-            kind="vector",
-            minimum=0.0,
-            maximum=1.0,
-            doc="per contact (welcome order), 0 = never a support even when touching "
-            "(lift a foot: single-support motions); default all 1",
-        ),
+        **CONTACT_PARAMETERS,
         "optimizer_period_ticks": ParamSpec(
             1,
             kind="int",
@@ -230,15 +216,9 @@ class MomentumController(Controller):
     # Parameters -----------------------------------------------------------------
 
     def default_value(self, key: str) -> Any:
-        """Reference pose defaults to the neutral pose, joint weights to ones."""
-        if key == "reference_joint_position":
-            return pin.neutral(self.robot.model)[7:]
+        """Joint weights default to ones (the rest: :meth:`Controller.default_value`)."""
         if key == "joint_weights":
             return np.ones(self.robot.nv_joints)
-        if key == "support_mask":
-            return np.ones(len(self.robot.contacts))
-        if key == "friction_coefficients":
-            return np.array([c.friction_coefficient for c in self.robot.contacts])
         return super().default_value(key)
 
     def parameters(self) -> dict[str, Any]:

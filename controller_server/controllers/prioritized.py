@@ -50,6 +50,7 @@ from controller_server.balance_points import (
     support_polygon,
 )
 from controller_server.controllers.base import (
+    CONTACT_PARAMETERS,
     ControlInput,
     Controller,
     ControlOutput,
@@ -204,7 +205,7 @@ class PrioritizedController(Controller):
         "damping_ratio": ParamSpec(
             1.0, minimum=0.0, maximum=100.0, doc="ζ of every setpoint: k_v = 2 ζ √k_p (eq. 4)"
         ),
-        "ground_height": ParamSpec(0.0, minimum=-1e3, maximum=1e3, doc="ground plane z (m)"),
+        **CONTACT_PARAMETERS,
         "non_penetration": ParamSpec(
             True, kind="bool", doc="enforce eq. 26 at the points carrying force"
         ),
@@ -213,21 +214,6 @@ class PrioritizedController(Controller):
             minimum=0.0,
             maximum=1.0,
             doc="sole points of a support this close to the ground carry force (m)",
-        ),
-        "friction_coefficients": ParamSpec(
-            None,
-            kind="vector",
-            minimum=0.0,
-            maximum=10.0,
-            doc="Coulomb μ per contact (welcome order); default the model's contacts' μ",
-        ),
-        "support_mask": ParamSpec(
-            None,
-            kind="vector",
-            minimum=0.0,
-            maximum=1.0,
-            doc="per contact (welcome order), 0 = never a support even when touching; "
-            "default all 1",
         ),
         "gain_bound": ParamSpec(
             1e3,
@@ -251,16 +237,10 @@ class PrioritizedController(Controller):
         super().__init__(robot, params)
 
     def default_value(self, key: str) -> Any:
-        """Model-dependent defaults: rest pose, standing CM height, per-contact vectors."""
+        """Standing CM height, no torque selection (the rest: :meth:`Controller.default_value`)."""
         robot = self.robot
-        if key == "reference_joint_position":
-            return pin.neutral(robot.model)[7:]
         if key == "torque_selection":
             return np.zeros(robot.nv_joints)
-        if key == "support_mask":
-            return np.ones(len(robot.contacts))
-        if key == "friction_coefficients":
-            return np.array([c.friction_coefficient for c in robot.contacts])
         if key == "com_height":
             q = pin.neutral(robot.model)
             q[:3] = robot.standing_position_base_in_world
