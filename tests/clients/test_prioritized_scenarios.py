@@ -2,6 +2,8 @@
 
 import pytest
 
+from clients.demo import DEMO_SCENARIOS
+from clients.sim.app import run_scenarios
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import load_scenario
 
@@ -23,3 +25,20 @@ def test_prioritized_controller_stands_in_both_simulators(server, backend):
     start = record.commands[0].diagnostics.position_com_in_world
     assert abs(last.position_com_in_world[1] - start[1]) < 0.01
     assert 0.0 < last.position_com_in_world[0] < 0.1
+
+
+@pytest.mark.parametrize("backend", ["reference", "mujoco"])
+def test_prioritized_controller_survives_the_thesis_pushes(server, backend, tmp_path):
+    """Issue 5 acceptance: `push_sequence` and `head_push` in both simulators."""
+    reports = run_scenarios(
+        DEMO_SCENARIOS,
+        tmp_path,
+        endpoint=server.endpoint,
+        overrides={"backend": backend, "controller": "prioritized"},
+        progress=False,
+    )
+    assert [r["scenario"] for r in reports] == list(DEMO_SCENARIOS)
+    for report in reports:
+        assert report["controller"] == "prioritized", report
+        assert not report["fell"], report
+        assert report["com_excursion_m"] < 0.3, report
