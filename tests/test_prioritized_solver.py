@@ -398,3 +398,19 @@ def test_invalid_input_is_refused_with_context():
         solve_prioritized([], *no_inequalities(2), qp_solver="no such solver")
     with pytest.raises(ValueError, match="gain_bound"):
         solve_prioritized([], *no_inequalities(2), gain_bound=0.0)
+
+
+def test_a_qp_failure_below_the_top_level_skips_only_that_level(monkeypatch):
+    """Below a solved level w = 0 is feasible: a failing QP solver is not infeasibility."""
+    monkeypatch.setattr(prioritized, "_solve_qp", lambda *args, **kwargs: None)
+    levels = [
+        [Objective("first", np.array([[1.0, 0.0, 0.0]]), np.array([1.0]), np.ones(1))],
+        [Objective("needs a QP", np.array([[0.0, 1.0, 0.0]]), np.array([5.0]), np.ones(1))],
+        [Objective("third", np.array([[0.0, 0.0, 1.0]]), np.array([3.0]), np.ones(1))],
+    ]
+    D = np.array([[0.0, -1.0, 0.0]])  # x1 ≤ 0.2: the second level's closed form violates it
+    f = np.array([0.2])
+    solution = solve_prioritized(levels, D, f)
+    assert [level.status for level in solution.levels] == ["solved", "solver failed", "solved"]
+    np.testing.assert_allclose(solution.x, [1.0, 0.0, 3.0], atol=1e-12)
+    assert not solution.found

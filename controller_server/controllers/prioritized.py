@@ -71,10 +71,16 @@ from controller_server.features.setpoint import (
 from controller_server.inverse_dynamics import wrenches_from_point_forces
 from controller_server.models import RobotModel
 from controller_server.solvers.prioritized import PrioritizedSolution, solve_prioritized
+from protocol.errors import ErrorCode, ProtocolError
 
 __all__ = ["OBJECTIVES", "PrioritizedController", "friction_cone_basis"]
 
 NUM_ROOT_DOFS = 6
+TARGET_HANDOVER_S = 0.05
+"""The target objective hands over to the setpoint this long before T: re-planned every tick,
+eq. 7 amplifies what is left of a velocity error as T → 0."""
+EXACT_GAIN_BOUND = 1e15
+"""Gain bound of the equations of motion: only directions at the rounding floor are singular."""
 
 OBJECTIVES: dict[str, tuple[int, float, str]] = {
     "contact": (1, 1.0, "sole points toward the ground (Table 1)"),
@@ -98,6 +104,10 @@ rest pose, folds the legs. So the centroidal momentum (linear and angular,
 driven by the same ground wrench) is one level, weighted as the weighted
 controller weights it (α = 10 each against 1 for the pose), under the
 contacts; the CM height ranks below it.
+
+With these defaults ``pose`` uses every joint's freedom at level 2, so the
+level-3 objectives (``com_height``, ``torque``) have none left and do
+nothing: rank them at 2 (or ``pose`` at 3) to use them.
 """
 
 
@@ -125,7 +135,7 @@ def _weight_spec(name: str) -> ParamSpec:
         OBJECTIVES[name][1],
         minimum=0.0,
         maximum=1e6,
-        doc=f"α of `{name}` within its level (eq. 37); 0 = off",
+        doc=f"weight of `{name}` within its level: α of eq. 16 (rows × √α); 0 = off",
     )
 
 
@@ -213,14 +223,15 @@ class PrioritizedController(Controller):
             0.005,
             minimum=0.0,
             maximum=1.0,
-            doc="sole points of a support this close to the ground carry force (m)",
+            doc="sole points of a contact `support_mask` allows carry force when this close "
+            "to the ground, whatever the contact flags (m)",
         ),
         "gain_bound": ParamSpec(
-            1e3,
-            minimum=1.0,
+            1e4,
+            minimum=10.0,
             maximum=1e12,
-            doc="B of Algorithm 1 on levels scaled to unit norm: σ < 1/B is singular, damped "
-            "steps ‖w‖ ≤ B ‖b̄‖ (Maciejewski eq. 18)",
+            doc="B of Algorithm 1 below the equations of motion, on levels scaled to unit "
+            "norm: σ < 1/B is singular, damped steps ‖w‖ ≤ B ‖b̄‖ (Maciejewski eq. 18)",
         ),
         "qp_solver": ParamSpec(
             "daqp",
@@ -299,9 +310,17 @@ class PrioritizedController(Controller):
             )
         ]
         D, f = self._inequalities(control_input, terms, layout)
-        solution = solve_prioritized(
-            ordered, D, f, gain_bound=p["gain_bound"], qp_solver=p["qp_solver"]
-        )
+        # The equations of motion are kept exactly (rounding floor only): a gain bound there
+        # would let lower levels bend the dynamics of a heavy robot.
+        bounds = [EXACT_GAIN_BOUND] + [p["gain_bound"]] * (len(ordered) - 1)
+        solution = solve_prioritized(ordered, D, f, gain_bound=bounds, qp_solver=p["qp_solver"])
+        if solution.levels[0].status != "solved":
+            raise ProtocolError(
+                ErrorCode.INTERNAL,
+                "controller",
+                f"the equations of motion could not be solved ({solution.levels[0].status}, "
+                f"QP solver {p['qp_solver']}); no command",
+            )
         return self._output(terms, layout, flags, objectives, solution)
 
     def _objectives(
@@ -445,7 +464,7 @@ class PrioritizedController(Controller):
             self._pending_height_change = False
         if self._height_change is not None:
             remaining = p["com_height_duration_s"] - (time_s - self._height_change[1])
-            if remaining > 0.0:
+            if remaining > TARGET_HANDOVER_S:
                 return float(target_acceleration(com[2], com_velocity[2], target, 0.0, remaining))
             self._height_change = None
         stiffness = p["com_height_stiffness"]

@@ -57,9 +57,11 @@ satisfies the inequalities (it is then the QP's optimum); otherwise the QP
 :func:`qpsolvers.solve_problem` in the coordinates ``z = Vᵀ w``, where its
 Hessian is the diagonal ``σᵢ² + λᵢ²`` (λ = 1/(2B) for the weak directions
 σ < 1/(2B)), and ``(10⁻⁶ σ_max)²`` in the directions without gain (σ = 0
-or at the rounding floor): strictly convex, but negligible against the
-level's own residual, so an active inequality is met by moving along the
-null space rather than by giving up part of the level. Below the first
+or at the rounding floor): strictly convex, yet small against the level's
+own residual, so an active inequality is met by moving along the null
+space rather than by giving up part of the level. If every solver fails on
+that QP (DAQP and quadprog once declared a feasible equations-of-motion
+level infeasible), it is solved again with ``(10⁻⁴ σ_max)²``. Below the first
 level ``w = 0`` is feasible; violations already accepted there may persist
 but not grow, so the QP starts exactly feasible. Solver failures (an
 exception, no solution, non-finite output) and solutions violating
@@ -104,13 +106,16 @@ from controller_server.solvers.damped import damping_for_gain_bound
 
 __all__ = ["LevelReport", "PrioritizedSolution", "solve_prioritized"]
 
-LevelStatus = Literal["solved", "infeasible", "not reached", "empty"]
+LevelStatus = Literal["solved", "infeasible", "solver failed", "not reached", "empty"]
 
 
-_NULL_CURVATURE = 1e-6
+_FALLBACK_ORDER = ("daqp", "quadprog", "proxqp")
+"""Solvers tried, in this order, after the chosen one fails on a QP."""
+_NULL_CURVATURES = (1e-6, 1e-4)
 """QP curvature of the directions without gain (σ = 0 or at the rounding floor), relative to
-σ_max: strictly convex, yet negligible against every kept direction (σ ≥ 1/B), so that the
-inequalities are met by moving along the null space, not by giving up this level's residual."""
+σ_max, tried in turn: strictly convex yet small against every kept direction (σ ≥ 1/B), so
+that an active inequality is met by moving along the null space rather than by giving up this
+level's residual; the larger one only when the solvers fail on the worse-conditioned QP."""
 
 
 @dataclass(frozen=True)
@@ -167,8 +172,11 @@ class LevelReport:
     Attributes:
         names: Names of the level's objectives.
         status: ``"solved"``; ``"infeasible"`` (the QP had no solution: ``x`` is the
-            solution of the levels above); ``"not reached"`` (after a level that used all
-            remaining freedom, or after an infeasible level); ``"empty"`` (no objectives).
+            solution of the levels above); ``"solver failed"`` (below a solved level, where
+            ``w = 0`` is feasible, so the QP solver failed: the level is skipped, its
+            freedom left to the levels below); ``"not reached"`` (after a level that used
+            all remaining freedom, or after an infeasible level); ``"empty"`` (no
+            objectives).
         residual: ``‖W^{½}(A x − b)‖`` at the returned ``x``.
         rank: Number of directions of ``Ā = A C̄`` kept by this level (σ ≥ tolerance);
             0 when not solved.
@@ -195,7 +203,8 @@ class PrioritizedSolution:
     """Result of :func:`solve_prioritized`.
 
     Attributes:
-        found: No level was infeasible and ``D x + f ≥ 0`` holds within the tolerance.
+        found: No level was infeasible or failed, and ``D x + f ≥ 0`` holds within the
+            tolerance.
         x: The solution (``d̄`` of Algorithm 1 where the solver stopped).
         levels: One report per level, in priority order.
         inequality_violation: ``max(0, max(−(D x + f)))``.
@@ -216,7 +225,7 @@ def solve_prioritized(
     inequality_matrix: np.ndarray,
     inequality_offset: np.ndarray,
     *,
-    gain_bound: float = 1e6,
+    gain_bound: float | Sequence[float] = 1e6,
     qp_solver: str = "daqp",
     feasibility_tolerance: float = 1e-7,
 ) -> PrioritizedSolution:
@@ -232,7 +241,7 @@ def solve_prioritized(
         inequality_offset: ``f``, ``(p,)``, for ``D x + f ≥ 0`` (eq. 28's ``D₀, f₀``).
         gain_bound: ``B``: singular values below ``1/B`` are treated as singular and the
             damping keeps every level's step within ``‖w‖ ≤ B ‖b̄‖``. Levels should be in
-            comparable units.
+            comparable units. One value for all levels, or one per level.
         qp_solver: A :mod:`qpsolvers` solver name (tested: ``"daqp"``, ``"quadprog"``,
             ``"proxqp"``).
         feasibility_tolerance: Largest accepted violation of ``D x + f ≥ 0`` after a QP.
@@ -246,8 +255,10 @@ def solve_prioritized(
             ``A`` or ``b``, ``B ≤ 0``, or a QP solver that is not installed.
     """
     start = time.perf_counter()
-    if not gain_bound > 0.0:
-        raise ValueError(f"the gain bound must be positive, got {gain_bound=}")
+    given = [float(gain_bound)] if isinstance(gain_bound, int | float) else list(gain_bound)
+    bounds = given * len(levels) if isinstance(gain_bound, int | float) else given
+    if len(bounds) != len(levels) or not all(b > 0.0 for b in given):
+        raise ValueError(f"need one positive gain bound, or one per level; got {gain_bound=}")
     if qp_solver not in qpsolvers.available_solvers:
         raise ValueError(
             f"{qp_solver=} is not an installed qpsolvers backend; "
@@ -267,8 +278,8 @@ def solve_prioritized(
     d_bar = np.zeros(n)
     slack = f.copy()  # D d̄ + f, kept up to date with d̄
     reports: list[LevelReport] = []
-    stopped = infeasible = False
-    for names, A, b in stacked:
+    stopped = infeasible = failed = False
+    for level_index, (names, A, b) in enumerate(stacked):
         if stopped:
             reports.append(LevelReport(names, "not reached", 0.0, 0, 0, 0.0, 0.0, False))
             continue
@@ -279,8 +290,18 @@ def solve_prioritized(
         A_bar = A if C_bar is None else A @ C_bar  # Algorithm 1, line 3
         b_bar = b - A @ d_bar  # line 4
         step = _solve_level(
-            A_bar, b_bar, D_C_bar, slack, gain_bound, qp_solver, feasibility_tolerance
+            A_bar, b_bar, D_C_bar, slack, bounds[level_index], qp_solver, feasibility_tolerance
         )
+        if step.w is None and level_index > 0 and _any_solved(reports):
+            # Below a solved level w = 0 is feasible, so this is the QP solver failing, not
+            # Algorithm 1's infeasibility: keep d̄ and C̄ and go on with the next level.
+            reports.append(
+                LevelReport(
+                    names, "solver failed", 0.0, 0, dimension, step.damping, step.tolerance, True
+                )
+            )
+            failed = True
+            continue
         if step.w is None:  # lines 7–8: keep d̄ of the levels above
             reports.append(
                 LevelReport(
@@ -313,7 +334,7 @@ def solve_prioritized(
     x = d_bar
     violation = max(0.0, -float(np.min(D @ x + f))) if D.shape[0] else 0.0
     return PrioritizedSolution(
-        found=not infeasible and violation <= feasibility_tolerance,
+        found=not (infeasible or failed) and violation <= feasibility_tolerance,
         x=x,
         levels=tuple(
             report
@@ -325,6 +346,11 @@ def solve_prioritized(
         qp_solver=qp_solver,
         solve_time_s=time.perf_counter() - start,
     )
+
+
+def _any_solved(reports: Sequence[LevelReport]) -> bool:
+    """Whether some level above was solved (so that ``w = 0`` is feasible below it)."""
+    return any(report.status == "solved" for report in reports)
 
 
 @dataclass(frozen=True)
@@ -364,7 +390,7 @@ def _solve_level(
     # Directions without gain (σ = 0 or at the rounding floor) are free for the levels below:
     # the QP only needs them strictly convex, not penalized against this level's residual.
     sigma_max = float(sigma[0]) if sigma.size else 0.0
-    curvature = np.full(k, max((_NULL_CURVATURE * sigma_max) ** 2, np.finfo(float).tiny))
+    curvature = np.zeros(k)
     curvature[:used] = sigma[:used] ** 2
     weak = int(np.searchsorted(-sigma[:used], -1.0 / gain_bound, side="right"))
     for i in range(weak, used):
@@ -383,14 +409,18 @@ def _solve_level(
             # grow: w = 0 is then exactly feasible, which degenerate vertices (more active
             # rows than unknowns, common in low levels) need for proxqp and quadprog.
             bound = np.where(slack >= -feasibility_tolerance, np.maximum(slack, 0.0), slack)
-            z_qp = _solve_qp(
-                curvature, linear, D_C_bar_V, bound, qp_solver, rank, feasibility_tolerance
-            )
-            if z_qp is None:
-                return _LevelStep(None, slack, null_basis, rank, damping, tolerance, used_qp)
-            w = Vt.T @ z_qp
-            new_slack = slack + D_C_bar_V @ z_qp
-            if not np.min(new_slack) >= -feasibility_tolerance:  # also catches NaN
+            for null_curvature in _NULL_CURVATURES:
+                curvature[used:] = max((null_curvature * sigma_max) ** 2, np.finfo(float).tiny)
+                z_qp = _solve_qp(
+                    curvature, linear, D_C_bar_V, bound, qp_solver, rank, feasibility_tolerance
+                )
+                if z_qp is None:
+                    continue
+                new_slack = slack + D_C_bar_V @ z_qp
+                if np.min(new_slack) >= -feasibility_tolerance:  # also rejects NaN
+                    w = Vt.T @ z_qp
+                    break
+            else:
                 return _LevelStep(None, slack, null_basis, rank, damping, tolerance, used_qp)
         slack = new_slack
     return _LevelStep(w, slack, null_basis, rank, damping, tolerance, used_qp)
@@ -405,29 +435,41 @@ def _solve_qp(
     rank: int,
     feasibility_tolerance: float,
 ) -> np.ndarray | None:
-    """``min ½ Σ hᵢ zᵢ² − Σ lᵢ zᵢ  s.t.  D C̄ V z + bound ≥ 0`` (eq. 35 in ``z = Vᵀ w``)."""
-    backend = _BACKENDS.get(qp_solver, _Backend({}))
-    if backend.curvature_floor:  # only in the directions passed down, never in the kept ones
-        curvature = curvature.copy()
-        floor = backend.curvature_floor * curvature.max()
-        np.maximum(curvature[rank:], floor, out=curvature[rank:])
-    gradient = np.zeros(curvature.size)
-    gradient[: linear.size] = -linear
-    relaxed = bound + backend.bound_relaxation * feasibility_tolerance
-    problem = qpsolvers.Problem(np.diag(curvature), gradient, -D_C_bar_V, relaxed)
-    attempts = [backend.settings]
-    if backend.retry is not None:
-        attempts.append({**backend.settings, **backend.retry})
-    for settings in attempts:
-        try:
-            solution = qpsolvers.solve_problem(problem, solver=qp_solver, **settings)
-        except (QPError, ValueError, np.linalg.LinAlgError):
-            continue
-        info = solution.extras.get("info") if isinstance(solution.extras, dict) else None
-        closest = info is not None and str(info.status).endswith("CLOSEST_PRIMAL_FEASIBLE")
-        z = solution.x
-        if (solution.found or closest) and z is not None and np.all(np.isfinite(z)):
-            return z
+    """``min ½ Σ hᵢ zᵢ² − Σ lᵢ zᵢ  s.t.  D C̄ V z + bound ≥ 0`` (eq. 35 in ``z = Vᵀ w``).
+
+    The chosen solver first (with its retry settings), then the other tested
+    solvers: an active-set solver stalling on a degenerate vertex does not make
+    the problem infeasible.
+    """
+    names = [qp_solver] + [
+        name
+        for name in _FALLBACK_ORDER
+        if name != qp_solver and name in qpsolvers.available_solvers
+    ]
+    for name in names:
+        backend = _BACKENDS.get(name, _Backend({}))
+        problem_curvature = curvature
+        if backend.curvature_floor:  # only in the directions passed down, never the kept ones
+            problem_curvature = curvature.copy()
+            floor = backend.curvature_floor * curvature.max()
+            np.maximum(problem_curvature[rank:], floor, out=problem_curvature[rank:])
+        gradient = np.zeros(curvature.size)
+        gradient[: linear.size] = -linear
+        relaxed = bound + backend.bound_relaxation * feasibility_tolerance
+        problem = qpsolvers.Problem(np.diag(problem_curvature), gradient, -D_C_bar_V, relaxed)
+        attempts = [backend.settings]
+        if backend.retry is not None:
+            attempts.append({**backend.settings, **backend.retry})
+        for settings in attempts:
+            try:
+                solution = qpsolvers.solve_problem(problem, solver=name, **settings)
+            except (QPError, ValueError, np.linalg.LinAlgError):
+                continue
+            info = solution.extras.get("info") if isinstance(solution.extras, dict) else None
+            closest = info is not None and str(info.status).endswith("CLOSEST_PRIMAL_FEASIBLE")
+            z = solution.x
+            if (solution.found or closest) and z is not None and np.all(np.isfinite(z)):
+                return z
     return None
 
 

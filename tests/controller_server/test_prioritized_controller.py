@@ -24,10 +24,11 @@ TABLE_1 = {
 }
 """de Lasa's Table 1 order (the default puts the momentum and pose in one level)."""
 CONFIGURATIONS = {
-    "default": (
-        {},
-        ("dynamics", "contact", "com", "angular_momentum", "pose", "trunk"),
+    "pose below the momentum": (
+        {"priority_pose": 3},
+        ("dynamics", "contact", "com", "angular_momentum", "trunk"),
         [
+            {"weight_pose": 25.0},
             {"weight_com_height": 25.0},
             {"com_height": 0.8},
             {"torque_selection": "ones", "weight_torque": 3.0},
@@ -260,3 +261,14 @@ def test_target_objective_is_bounded_as_the_time_runs_out():
     ]
     assert max(accelerations) <= 100.0 * math.hypot(0.1, 0.0) * (1 + 1e-9)
     assert accelerations[-1] < 1e-3  # σ → 0: the damped solution goes to zero (eq. 19)
+
+
+def test_a_new_cm_height_moves_the_cm_when_ranked_with_the_momentum():
+    robot = load_robot_model("thesis_humanoid")
+    q, v = near_standing_state(robot, 9)
+    params = {"priority_com_height": 2, "priority_pose": 3}
+    default = compute(robot, q, v, params)
+    lowered = compute(robot, q, v, {**params, "com_height": 0.7})
+    rate = "linear_momentum_rate_achieved"
+    # Lower the CM: the ground pushes less than before (L̇_z smaller).
+    assert lowered.diagnostics[rate][2] < default.diagnostics[rate][2] - 1.0
