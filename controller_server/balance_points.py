@@ -199,6 +199,8 @@ def closest_point_in_polygon(point_xy: np.ndarray, polygon_xy: np.ndarray) -> np
     """
     px, py = (float(c) for c in point_xy[:2])
     vertices = np.asarray(polygon_xy, dtype=float).reshape(-1, 2).tolist()
+    if not vertices or not np.all(np.isfinite(vertices)):
+        return np.full(2, np.nan)  # no polygon: nothing is inside it
     edges = list(zip(vertices, vertices[1:] + vertices[:1], strict=True))
     if len(vertices) >= 3 and all(
         (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0) >= 0.0 for (x0, y0), (x1, y1) in edges

@@ -17,8 +17,8 @@ __all__ = ["build_parser", "main"]
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
 CONTROLLER_NAMES = ["momentum", "prioritized", "tracking"]
-"""Controllers a client may pick (`controller_server.controllers.CONTROLLERS`; a test keeps
-them equal without importing the controllers at CLI start-up)."""
+"""Controllers a client may pick: the keys of `controller_server.controllers.CONTROLLERS`,
+listed here so that the CLI starts without importing them (a test keeps the two equal)."""
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -67,7 +67,15 @@ def _sim(args: argparse.Namespace) -> int:
     with server_endpoint(args.connect) as endpoint:
         for label, (controller, params) in SWEEP_CONTROLLERS.items():
             base = load_scenario(args.scenarios[0], **{**overrides, "controller": controller})
-            base = base.model_copy(update={"params": {**base.params, **params}, "pushes": []})
+            # Scenario parameters and changes are written for the scenario's own controller.
+            own = load_scenario(args.scenarios[0]).controller == controller
+            base = base.model_copy(
+                update={
+                    "params": {**(base.params if own else {}), **params},
+                    "param_changes": base.param_changes if own else [],
+                    "pushes": [],
+                }
+            )
             force_N = sweep_push(base, push, endpoint)
             print(f"{label:<32} survives {force_N:7.1f} N = {force_N * push.duration_s:6.1f} N·s")
     return 0

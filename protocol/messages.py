@@ -226,7 +226,9 @@ class PriorityLevelReport(_Strict):
         "‖W^½ (A x − b)‖ at the returned x, the level scaled to ‖W^½ A‖_F = 1 "
         "(per objective, in its own units: `objective_residuals`)."
     )
-    rank: int = wire_field("Directions of A C̄ this level used (σ ≥ 1/B).")
+    rank: int = wire_field(
+        "Directions of A C̄ this level used: σ ≥ max(1/B, rounding floor), the level scaled."
+    )
     null_space_dimension: int = wire_field("Freedom left to the levels below.")
     damping: float = wire_field("Damping λ of the level's solve (Maciejewski eq. 15).")
     used_qp: bool = wire_field("Whether an inequality was active, so a QP was solved.")
@@ -296,11 +298,13 @@ class Diagnostics(_Strict):
         "Per objective, the weighted residual ‖W (A q̈ − b)‖ at the returned q̈."
     )
     objective_condition_number: float = wire_field(
-        "Condition number of the damped objective Hessian M (App. D); NaN for `prioritized`.",
+        "Condition number of the damped objective Hessian M (App. D), LAPACK's 1-norm "
+        "estimate; NaN for `prioritized`.",
         unit="1",
     )
     schur_condition_number: float = wire_field(
-        "Condition number of C M⁻¹ Cᵀ before damping (App. D, eq. D.7); NaN for `prioritized`.",
+        "Condition number of C M⁻¹ Cᵀ before damping (App. D, eq. D.7): LAPACK's 1-norm "
+        "estimate, or the eigenvalue ratio when damped; NaN for `prioritized`.",
         unit="1",
     )
     objective_damping: float = wire_field("Damping λ on the objective stack (Maciejewski eq. 15).")
@@ -308,7 +312,8 @@ class Diagnostics(_Strict):
         "Damping λ on the Schur complement (Maciejewski eq. 15)."
     )
     constraint_residual: float = wire_field(
-        "‖J_sup q̈ + J̇_sup q̇‖ of the optimizer's q̈ (non-zero only when damped).",
+        "‖J_sup q̈ + J̇_sup q̇‖ of the returned q̈ (weighted controllers: non-zero only when "
+        "damped; prioritized: whatever the contact level could not meet).",
         unit="m/s², rad/s²",
     )
     root_wrench_residual: float = wire_field(

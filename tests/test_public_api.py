@@ -63,3 +63,10 @@ def test_protocol_does_not_import_robotics_code():
     heavy = ("pinocchio", "controller_server", "clients")
     code = f"import sys, protocol; print(sorted(m for m in {heavy!r} if m in sys.modules))"
     assert subprocess.check_output([sys.executable, "-c", code], text=True).strip() == "[]"
+
+
+def test_cli_controller_choices_are_the_servers_controllers():
+    from controller_server.cli import CONTROLLER_NAMES
+    from controller_server.controllers import CONTROLLERS
+
+    assert sorted(CONTROLLERS) == CONTROLLER_NAMES

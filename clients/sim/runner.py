@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from clients.client import ControllerClient
+from clients.client import ControllerClient, ServerError
 from clients.layout import joint_slices, neutral_joint_position
 from clients.sim.backend import PhysicsBackend
 from clients.sim.scenario import Scenario
@@ -177,7 +177,12 @@ def run_scenario(
                 scenario.support_force_threshold_N,
             )
             wrenches = all_wrenches if measured else None
-            command = client.step(state.to_message(backend.time_s, flags, wrenches))
+            try:
+                command = client.step(state.to_message(backend.time_s, flags, wrenches))
+            except ServerError as exc:  # no command for this state: the run ends here
+                record.fell, record.fall_time_s = True, backend.time_s
+                record.fall_reason = f"controller error {exc.code.name}: {exc.detail}"
+                break
             record.time_s.append(tick / scenario.control_rate_hz)
             record.states.append(state)
             record.commands.append(command)

@@ -108,7 +108,7 @@ def damped_cholesky(gram: np.ndarray, gain_bound: float) -> DampedFactor | None:
         gain_bound: ``B``.
 
     Returns:
-        The factor, or ``None`` if ``G`` is not finite.
+        The factor, or ``None`` if ``G + λ² I`` is not finite or not positive definite.
     """
     size = len(gram)
     identity = np.eye(size)

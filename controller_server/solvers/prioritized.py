@@ -290,7 +290,14 @@ def solve_prioritized(
         A_bar = A if C_bar is None else A @ C_bar  # Algorithm 1, line 3
         b_bar = b - A @ d_bar  # line 4
         step = _solve_level(
-            A_bar, b_bar, D_C_bar, slack, bounds[level_index], qp_solver, feasibility_tolerance
+            A_bar,
+            b_bar,
+            D_C_bar,
+            slack,
+            bounds[level_index],
+            qp_solver,
+            feasibility_tolerance,
+            persist=level_index == 0,
         )
         if step.w is None and level_index > 0 and _any_solved(reports):
             # Below a solved level w = 0 is feasible, so this is the QP solver failing, not
@@ -374,6 +381,7 @@ def _solve_level(
     gain_bound: float,
     qp_solver: str,
     feasibility_tolerance: float,
+    persist: bool,
 ) -> _LevelStep:
     """Algorithm 1, lines 5–6 and ``null(Ā)``, from one SVD of ``Ā``."""
     m, k = A_bar.shape
@@ -409,10 +417,19 @@ def _solve_level(
             # grow: w = 0 is then exactly feasible, which degenerate vertices (more active
             # rows than unknowns, common in low levels) need for proxqp and quadprog.
             bound = np.where(slack >= -feasibility_tolerance, np.maximum(slack, 0.0), slack)
-            for null_curvature in _NULL_CURVATURES:
+            # The top level, where a failure ends the solve, tries every solver and both
+            # curvatures; below it a failure only skips the level, so one solver is enough.
+            for null_curvature in _NULL_CURVATURES if persist else _NULL_CURVATURES[:1]:
                 curvature[used:] = max((null_curvature * sigma_max) ** 2, np.finfo(float).tiny)
                 z_qp = _solve_qp(
-                    curvature, linear, D_C_bar_V, bound, qp_solver, rank, feasibility_tolerance
+                    curvature,
+                    linear,
+                    D_C_bar_V,
+                    bound,
+                    qp_solver,
+                    rank,
+                    feasibility_tolerance,
+                    fallbacks=persist,
                 )
                 if z_qp is None:
                     continue
@@ -434,17 +451,18 @@ def _solve_qp(
     qp_solver: str,
     rank: int,
     feasibility_tolerance: float,
+    fallbacks: bool,
 ) -> np.ndarray | None:
     """``min ½ Σ hᵢ zᵢ² − Σ lᵢ zᵢ  s.t.  D C̄ V z + bound ≥ 0`` (eq. 35 in ``z = Vᵀ w``).
 
-    The chosen solver first (with its retry settings), then the other tested
-    solvers: an active-set solver stalling on a degenerate vertex does not make
-    the problem infeasible.
+    The chosen solver first (with its retry settings), then, with
+    ``fallbacks``, the other tested solvers: an active-set solver stalling on a
+    degenerate vertex does not make the problem infeasible.
     """
     names = [qp_solver] + [
         name
         for name in _FALLBACK_ORDER
-        if name != qp_solver and name in qpsolvers.available_solvers
+        if fallbacks and name != qp_solver and name in qpsolvers.available_solvers
     ]
     for name in names:
         backend = _BACKENDS.get(name, _Backend({}))
