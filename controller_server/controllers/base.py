@@ -219,6 +219,15 @@ class Controller(ABC):
             return int(array[0])
         return float(array[0]) if spec.kind == "float" else array
 
+    def supports(self, control_input: ControlInput) -> tuple[bool, ...]:
+        """Contacts used as supports: flagged by the client and allowed by ``support_mask``."""
+        return tuple(
+            bool(on and allowed > 0.5)
+            for on, allowed in zip(
+                control_input.contact_flags, self._params["support_mask"], strict=True
+            )
+        )
+
     @abstractmethod
     def compute(self, control_input: ControlInput) -> ControlOutput:
         """Accelerations and torques for one tick."""

@@ -311,10 +311,7 @@ class MomentumController(Controller):
             raise InvalidParams(
                 "contact_wrench_in_world", "required in ground_force_mode 'measured'"
             )
-        flags = tuple(
-            bool(on and allowed > 0.5)
-            for on, allowed in zip(control_input.contact_flags, p["support_mask"], strict=True)
-        )
+        flags = self.supports(control_input)
         supporting = [
             pts for pts, on in zip(terms.position_points_in_world, flags, strict=True) if on
         ]

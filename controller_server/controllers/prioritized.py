@@ -49,6 +49,7 @@ from controller_server.balance_points import (
     shrink_polygon,
     support_polygon,
 )
+from controller_server.constraints import compute_support_equalities
 from controller_server.controllers.base import (
     CONTACT_PARAMETERS,
     ControlInput,
@@ -243,7 +244,7 @@ class PrioritizedController(Controller):
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self._data = robot.model.createData()
-        self._height_change: tuple[float, float] | None = None  # (start value, start time)
+        self._height_change_start_s: float | None = None  # state time a new height was set
         self._pending_height_change = False
         super().__init__(robot, params)
 
@@ -283,10 +284,7 @@ class PrioritizedController(Controller):
         """Build the levels and inequalities, solve them (Algorithm 1), read off τ, q̈, f."""
         p, robot = self._params, self.robot
         terms = compute_dynamics_terms(robot, self._data, control_input.q, control_input.v)
-        flags = tuple(
-            bool(on and allowed > 0.5)
-            for on, allowed in zip(control_input.contact_flags, p["support_mask"], strict=True)
-        )
+        flags = self.supports(control_input)
         layout = _Layout(
             robot,
             terms,
@@ -296,7 +294,7 @@ class PrioritizedController(Controller):
             p["ground_height"],
             p["contact_distance"],
         )
-        objectives = self._objectives(control_input, terms, layout)
+        objectives, desired_rates = self._objectives(control_input, terms, layout)
         levels: dict[int, list[Objective]] = {}
         for name, objective in objectives.items():
             if name not in ("dynamics", "forces") and np.any(objective.weight > 0):
@@ -321,11 +319,12 @@ class PrioritizedController(Controller):
                 f"the equations of motion could not be solved ({solution.levels[0].status}, "
                 f"QP solver {p['qp_solver']}); no command",
             )
-        return self._output(terms, layout, flags, objectives, solution)
+        return self._output(terms, layout, flags, objectives, desired_rates, solution)
 
     def _objectives(
         self, control_input: ControlInput, terms: DynamicsTerms, layout: _Layout
-    ) -> dict[str, Objective]:
+    ) -> tuple[dict[str, Objective], dict[str, np.ndarray]]:
+        """The objectives by name, and the desired momentum rates (for the diagnostics)."""
         p, model = self._params, self.robot.model
         q, v = control_input.q, control_input.v
         momentum, mass = terms.momentum, terms.total_mass
@@ -377,7 +376,7 @@ class PrioritizedController(Controller):
                 mass * np.array([*desired_xy, 0.0]),
                 mass,
                 com,
-                shrink_polygon(support_polygon(layout.support_positions), p["cop_margin"]),
+                shrink_polygon(layout.support_polygon, p["cop_margin"]),
                 p["ground_height"],
                 gravity,
                 friction_coefficient=layout.smallest_friction_coefficient,
@@ -411,27 +410,30 @@ class PrioritizedController(Controller):
         q_rest[:3] = q[:3]
         q_rest[3:7] = p["reference_trunk_orientation_xyzw"]
         q_rest[7:] = p["reference_joint_position"]
+        # One PD on the configuration error (eq. 4): the root orientation rows are `trunk`, the
+        # joint rows the rest pose `pose` (§4), each with its own gains.
+        stiffness = np.concatenate(
+            [
+                np.zeros(3),
+                np.full(3, p["trunk_stiffness"]),
+                np.full(model.nv - 6, p["pose_stiffness"]),
+            ]
+        )
         zero = np.zeros(model.nv)
-        stiffness = p["pose_stiffness"]
-        pose = compute_tracking_objective(
+        servo = compute_tracking_objective(
             model, q, v, q_rest, zero, zero, stiffness, critical_damping(stiffness, ratio), zero
         )
-        # Rest pose on the joints (§4); the root's orientation is its own feature, `trunk`.
         objectives["pose"] = layout.over_acceleration(
-            "pose", pose.A[6:], pose.b[6:], p["weight_pose"]
-        )
-        stiffness = p["trunk_stiffness"]
-        trunk = compute_tracking_objective(
-            model, q, v, q_rest, zero, zero, stiffness, critical_damping(stiffness, ratio), zero
+            "pose", servo.A[6:], servo.b[6:], p["weight_pose"]
         )
         objectives["trunk"] = layout.over_acceleration(
-            "trunk", trunk.A[3:6], trunk.b[3:6], p["weight_trunk"]
+            "trunk", servo.A[3:6], servo.b[3:6], p["weight_trunk"]
         )
         # Lowest level: the contact forces the levels above leave free (internal forces
         # between the feet) are the smallest, as in the weighted controller's distribution.
         objectives["forces"] = Objective(
             "forces",
-            np.hstack([np.zeros((layout.nl, layout.nu + layout.nv)), np.eye(layout.nl)]),
+            layout.force_selection,
             np.zeros(layout.nl),
             np.ones(layout.nl),
         )
@@ -447,11 +449,11 @@ class PrioritizedController(Controller):
             np.zeros(selection.size),
             np.full(selection.size, p["weight_torque"]) * (selection > 0),
         )
-        self._desired = {
+        desired_rates = {
             "linear_momentum_rate": mass * desired_com_acceleration,
             "angular_momentum_rate": desired_rate,
         }
-        return objectives
+        return objectives, desired_rates
 
     def _height_acceleration(
         self, time_s: float, com: np.ndarray, com_velocity: np.ndarray
@@ -460,13 +462,13 @@ class PrioritizedController(Controller):
         p = self._params
         target = p["com_height"] + p["ground_height"]
         if self._pending_height_change:
-            self._height_change = (float(com[2]), time_s)
+            self._height_change_start_s = time_s
             self._pending_height_change = False
-        if self._height_change is not None:
-            remaining = p["com_height_duration_s"] - (time_s - self._height_change[1])
+        if self._height_change_start_s is not None:
+            remaining = p["com_height_duration_s"] - (time_s - self._height_change_start_s)
             if remaining > TARGET_HANDOVER_S:
                 return float(target_acceleration(com[2], com_velocity[2], target, 0.0, remaining))
-            self._height_change = None
+            self._height_change_start_s = None
         stiffness = p["com_height_stiffness"]
         return float(
             setpoint_acceleration(
@@ -482,11 +484,11 @@ class PrioritizedController(Controller):
         self, control_input: ControlInput, terms: DynamicsTerms, layout: _Layout
     ) -> tuple[np.ndarray, np.ndarray]:
         """Rows of ``D x + f ≥ 0``: λ ≥ 0, non-penetration, torque and joint limits."""
-        n, nu, nv, nl = layout.size, layout.nu, layout.nv, layout.nl
+        n, nu, nl = layout.size, layout.nu, layout.nl
         blocks: list[tuple[np.ndarray, np.ndarray]] = []
         # λ ≥ 0 (eq. 25).
         if nl:
-            blocks.append((np.hstack([np.zeros((nl, nu + nv)), np.eye(nl)]), np.zeros(nl)))
+            blocks.append((layout.force_selection, np.zeros(nl)))
         if nl and self._params["non_penetration"]:
             # Vᵀ (J_c q̈ + J̇_c q̇) ≥ 0 (eq. 26).
             blocks.append(
@@ -515,6 +517,7 @@ class PrioritizedController(Controller):
         layout: _Layout,
         flags: tuple[bool, ...],
         objectives: dict[str, Objective],
+        desired_rates: dict[str, np.ndarray],
         solution: PrioritizedSolution,
     ) -> ControlOutput:
         p, robot = self._params, self.robot
@@ -532,35 +535,22 @@ class PrioritizedController(Controller):
         acceleration = np.linalg.solve(terms.mass_matrix, generalized - terms.bias_forces)
         momentum = terms.momentum
         cop, cmp_ = ground_reference_points(terms, wrenches, flags, p["ground_height"])
-        supporting = [
-            pts for pts, on in zip(terms.position_points_in_world, flags, strict=True) if on
-        ]
-        polygon = support_polygon(np.vstack(supporting)) if supporting else np.zeros((0, 2))
-        support_rows = [J for J, on in zip(terms.support_jacobians, flags, strict=True) if on]
-        support_drift = [a for a, on in zip(terms.support_drifts, flags, strict=True) if on]
-        constraint_residual = (
-            float(
-                np.linalg.norm(
-                    np.vstack(support_rows) @ acceleration + np.concatenate(support_drift)
-                )
-            )
-            if support_rows
-            else 0.0
-        )
+        support = compute_support_equalities(terms, flags)
+        constraint_residual = float(np.linalg.norm(support.C @ acceleration - support.d))
         diagnostics = {
             "optimizer_ran": True,
             "position_com_in_world": terms.position_com_in_world,
             "velocity_com_in_world": momentum.linear_momentum / terms.total_mass,
             "linear_momentum": momentum.linear_momentum,
             "angular_momentum": momentum.angular_momentum,
-            "linear_momentum_rate_desired": self._desired["linear_momentum_rate"],
+            "linear_momentum_rate_desired": desired_rates["linear_momentum_rate"],
             "linear_momentum_rate_achieved": momentum.R @ acceleration + momentum.r_bias,
-            "angular_momentum_rate_desired": self._desired["angular_momentum_rate"],
+            "angular_momentum_rate_desired": desired_rates["angular_momentum_rate"],
             "angular_momentum_rate_achieved": momentum.S @ acceleration + momentum.s_bias,
             "center_of_pressure": cop,
             "centroidal_moment_pivot": cmp_,
             "supports": list(flags),
-            "support_polygon_xy": polygon.reshape(-1),
+            "support_polygon_xy": layout.support_polygon.reshape(-1),
             "angular_momentum_weight": p["weight_angular_momentum"],
             "objective_residuals": {name: o.residual(x) for name, o in objectives.items()},
             "objective_condition_number": math.nan,
@@ -649,6 +639,8 @@ class _Layout:
         supporting = np.flatnonzero(np.asarray(supports)[owner])
         #: Supporting points' positions ``(k, 3)``: the base of support.
         self.support_positions = positions[supporting]
+        #: Their convex hull, counter-clockwise x–y vertices.
+        self.support_polygon = support_polygon(self.support_positions)
         self.smallest_friction_coefficient = float(mus[supporting].min(initial=math.inf))
         near = positions[planted_points, 2] <= ground_height + contact_distance
         loaded = planted_points[near]
@@ -668,6 +660,8 @@ class _Layout:
         #: ``(nv, nu)``: Sᵀ, actuated torques into generalized forces.
         self.S_T = np.vstack([np.zeros((NUM_ROOT_DOFS, self.nu)), np.eye(self.nu)])
         self.size = self.nu + nv + self.nl
+        #: ``(nλ, size)``: the rows picking λ out of x.
+        self.force_selection = np.hstack([np.zeros((self.nl, self.nu + nv)), np.eye(self.nl)])
 
     def over_acceleration(
         self,

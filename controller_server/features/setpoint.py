@@ -15,7 +15,7 @@ penalizing ``‖ÿ_d − ÿ‖²`` with ``ÿ = J q̈ + J̇ q̇`` (eq. 5). Two wa
 
 from __future__ import annotations
 
-import math
+from typing import Any
 
 import numpy as np
 
@@ -24,9 +24,13 @@ from controller_server.solvers.damped import damping_for_gain_bound
 __all__ = ["critical_damping", "setpoint_acceleration", "target_acceleration"]
 
 
-def critical_damping(stiffness: float, damping_ratio: float = 1.0) -> float:
-    """``k_v = 2 ζ √k_p``: de Lasa's default ``k_v = 2 √k_p`` at ``ζ = 1`` (eq. 4)."""
-    return 2.0 * damping_ratio * math.sqrt(max(stiffness, 0.0))
+def critical_damping(stiffness: Any, damping_ratio: float = 1.0) -> Any:
+    """``k_v = 2 ζ √k_p``: de Lasa's default ``k_v = 2 √k_p`` at ``ζ = 1`` (eq. 4).
+
+    ``stiffness`` is a scalar (a float comes back) or per DoF (an array comes back).
+    """
+    damping = 2.0 * damping_ratio * np.sqrt(np.maximum(stiffness, 0.0))
+    return float(damping) if np.ndim(damping) == 0 else damping
 
 
 def setpoint_acceleration(

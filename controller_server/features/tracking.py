@@ -27,8 +27,8 @@ def compute_tracking_objective(
     q_ref: np.ndarray,
     v_ref: np.ndarray,
     a_ref: np.ndarray,
-    stiffness: float,
-    damping: float,
+    stiffness: float | np.ndarray,
+    damping: float | np.ndarray,
     weight: np.ndarray,
 ) -> Objective:
     """Rows ``A = I``, ``b = q̈_des`` with per-DoF weights (eq. 5.3–5.4).
@@ -40,8 +40,8 @@ def compute_tracking_objective(
         q_ref: Reference configuration, ``(nq,)``.
         v_ref: Reference velocity, ``(nv,)``.
         a_ref: Feed-forward reference acceleration, ``(nv,)``.
-        stiffness: ``k_s`` (1/s²).
-        damping: ``k_d`` (1/s).
+        stiffness: ``k_s`` (1/s²), scalar or per DoF.
+        damping: ``k_d`` (1/s), scalar or per DoF.
         weight: ``(nv,)`` diagonal of ``W_tᵀ W_t``; zero rows are not tracked.
 
     Returns:

@@ -464,6 +464,8 @@ def _solve_qp(
         for name in _FALLBACK_ORDER
         if fallbacks and name != qp_solver and name in qpsolvers.available_solvers
     ]
+    gradient = np.zeros(curvature.size)
+    gradient[: linear.size] = -linear
     for name in names:
         backend = _BACKENDS.get(name, _Backend({}))
         problem_curvature = curvature
@@ -471,8 +473,6 @@ def _solve_qp(
             problem_curvature = curvature.copy()
             floor = backend.curvature_floor * curvature.max()
             np.maximum(problem_curvature[rank:], floor, out=problem_curvature[rank:])
-        gradient = np.zeros(curvature.size)
-        gradient[: linear.size] = -linear
         relaxed = bound + backend.bound_relaxation * feasibility_tolerance
         problem = qpsolvers.Problem(np.diag(problem_curvature), gradient, -D_C_bar_V, relaxed)
         attempts = [backend.settings]
