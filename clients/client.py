@@ -66,6 +66,7 @@ class ControllerClient:
         self._socket: zmq.Socket | None = None
         self._hello: Hello | None = None
         self._seq = 0
+        self._pending_seq: int | None = None
         self._needs_reconnect = False
 
     def __enter__(self) -> ControllerClient:
@@ -118,6 +119,31 @@ class ControllerClient:
         """Send one state and return the command for it (``seq`` is set here)."""
         return self._request(state, Command)
 
+    def send_state(self, state: State) -> None:
+        """Send one state without waiting: the first half of :meth:`step`.
+
+        The server computes while the caller works (a simulator steps its
+        physics, a bridge drives its actuators); :meth:`receive_command`
+        then returns the reply. One state may be outstanding at a time.
+        """
+        if self._pending_seq is not None:
+            raise PoiseError("receive_command() the outstanding state's reply first")
+        if self._needs_reconnect:
+            self.reconnect()
+        self._pending_seq = self._post(state)
+
+    def receive_command(self) -> Command:
+        """Wait for the reply to the state sent by :meth:`send_state`.
+
+        Raises:
+            ServerError: The server answered with an ``error``.
+            ServerTimeout: No answer within ``timeout_s`` of this call.
+        """
+        seq, self._pending_seq = self._pending_seq, None
+        if seq is None:
+            raise PoiseError("send_state() before receive_command()")
+        return self._await(seq, "state", Command, self.timeout_s)
+
     def set_params(self, params: Mapping[str, Any]) -> dict[str, Any]:
         """Change controller parameters; returns every parameter in force."""
         return self._request(SetParams(params=dict(params)), Params).params
@@ -149,6 +175,8 @@ class ControllerClient:
         return self.welcome
 
     def _request(self, message: Message, reply_type: type[Any]) -> Any:
+        if self._pending_seq is not None:
+            raise PoiseError("receive_command() the outstanding state's reply first")
         if self._needs_reconnect:
             self.reconnect()
         return self._send(message, reply_type, self.timeout_s)
@@ -161,15 +189,21 @@ class ControllerClient:
         return self._socket
 
     def _close_socket(self) -> None:
+        self._pending_seq = None
         if self._socket is not None:
             self._socket.close(linger=0)
             self._socket = None
 
     def _send(self, message: Message, reply_type: type[Any], timeout_s: float) -> Any:
-        socket = self._open_socket()
+        return self._await(self._post(message), message.type, reply_type, timeout_s)
+
+    def _post(self, message: Message) -> int:
         self._seq += 1
-        seq = self._seq
-        socket.send(encode(message.model_copy(update={"seq": seq})))
+        self._open_socket().send(encode(message.model_copy(update={"seq": self._seq})))
+        return self._seq
+
+    def _await(self, seq: int, request_type: str, reply_type: type[Any], timeout_s: float) -> Any:
+        socket = self._open_socket()
         deadline = time.monotonic() + timeout_s
         while (remaining_ms := (deadline - time.monotonic()) * 1000) > 0:
             if not socket.poll(max(1, int(remaining_ms)), zmq.POLLIN):
@@ -189,6 +223,6 @@ class ControllerClient:
             return reply
         self._needs_reconnect = True
         raise ServerTimeout(
-            f"no reply to {message.type!r} from {self.endpoint} within {timeout_s:.3g} s; "
+            f"no reply to {request_type!r} from {self.endpoint} within {timeout_s:.3g} s; "
             "check that `poise serve` is running there"
         )

@@ -47,8 +47,8 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _sim(args: argparse.Namespace) -> int:
-    from clients.sim.app import SWEEP_CONTROLLERS, run_scenarios, server_endpoint, sweep_push
-    from clients.sim.scenario import PushSpec, load_scenario
+    from clients.sim.app import SWEEP_DIRECTIONS, run_scenarios, server_endpoint, sweep_controllers
+    from clients.sim.scenario import PushSpec
 
     overrides = {}
     if args.backend:
@@ -60,24 +60,15 @@ def _sim(args: argparse.Namespace) -> int:
         return 0
     push = PushSpec(
         body=args.push_body,
-        force_in_world_N=tuple(args.push_direction),
+        force_in_world_N=(1.0, 0.0, 0.0),
         start_s=args.push_start,
         duration_s=args.push_duration,
     )
+    directions = SWEEP_DIRECTIONS
+    if args.push_direction:
+        directions = {f"({x:g}, {y:g}, {z:g})": (x, y, z) for x, y, z in args.push_direction}
     with server_endpoint(args.connect) as endpoint:
-        for label, (controller, params) in SWEEP_CONTROLLERS.items():
-            base = load_scenario(args.scenarios[0], **{**overrides, "controller": controller})
-            # Scenario parameters and changes are written for the scenario's own controller.
-            own = load_scenario(args.scenarios[0]).controller == controller
-            base = base.model_copy(
-                update={
-                    "params": {**(base.params if own else {}), **params},
-                    "param_changes": base.param_changes if own else [],
-                    "pushes": [],
-                }
-            )
-            force_N = sweep_push(base, push, endpoint)
-            print(f"{label:<32} survives {force_N:7.1f} N = {force_N * push.duration_s:6.1f} N·s")
+        sweep_controllers(args.scenarios[0], push, directions, endpoint, overrides)
     return 0
 
 
@@ -138,16 +129,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--sweep-push",
         action="store_true",
         help="find by bisection the largest push each thesis ablation and the prioritized "
-        "controller survive (first scenario)",
+        "controller survive, per direction (first scenario)",
     )
     sim.add_argument("--push-body", default="chest", help="body pushed in the sweep")
     sim.add_argument(
         "--push-direction",
         type=float,
         nargs=3,
-        default=[1.0, 0.0, 0.0],
+        action="append",
         metavar=("X", "Y", "Z"),
-        help="push direction in world (normalised)",
+        help="push direction in world (normalised); repeat for several (default: from behind "
+        "+x, from the front -x, from the side +y)",
     )
     sim.add_argument("--push-start", type=float, default=0.5, metavar="SECONDS")
     sim.add_argument("--push-duration", type=float, default=0.1, metavar="SECONDS")

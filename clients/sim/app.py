@@ -15,7 +15,15 @@ from clients.sim.plots import plot_run
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import PushSpec, Scenario, load_scenario
 
-__all__ = ["ABLATIONS", "SWEEP_CONTROLLERS", "run_scenarios", "server_endpoint", "sweep_push"]
+__all__ = [
+    "ABLATIONS",
+    "SWEEP_CONTROLLERS",
+    "SWEEP_DIRECTIONS",
+    "run_scenarios",
+    "server_endpoint",
+    "sweep_controllers",
+    "sweep_push",
+]
 
 ANGULAR_OFF: dict[str, Any] = {"angular_momentum_gain": 0.0, "weight_angular_momentum": 0.0}
 ABLATIONS: dict[str, dict[str, Any]] = {
@@ -29,6 +37,13 @@ SWEEP_CONTROLLERS: dict[str, tuple[str, dict[str, Any]]] = {
     "prioritized (de Lasa 2010)": ("prioritized", {}),
 }
 """What ``poise sim --sweep-push`` compares: label → (controller, parameter overrides)."""
+SWEEP_DIRECTIONS: dict[str, tuple[float, float, float]] = {
+    "from behind": (1.0, 0.0, 0.0),
+    "from the front": (-1.0, 0.0, 0.0),
+    "from the side": (0.0, 1.0, 0.0),
+}
+"""Default push directions of the sweep (world axes, x forward, y left): a robot
+survives a push of a given size only if it survives it from its weakest side."""
 
 
 def _progress_bar(label: str) -> Callable[[float], None]:
@@ -98,12 +113,16 @@ def sweep_push(
     endpoint: str,
     max_force_N: float = 2000.0,
     tolerance_N: float = 5.0,
+    settle_s: float = 3.0,
 ) -> float:
     """Largest push force (N) the scenario survives, by bisection (thesis ch. 7.1).
 
     The push's direction is ``push.force_in_world_N`` normalised; its body,
-    point, start and duration are kept. Returns 0 if even the smallest push fells it.
+    point, start and duration are kept. Each trial runs at least ``settle_s``
+    past the end of the push: a robot still toppling when the scenario's own
+    duration ends has not survived. Returns 0 if even the smallest push fells it.
     """
+    duration_s = max(base.duration_s, push.start_s + push.duration_s + settle_s)
     direction = [
         c / max(1e-12, sum(x * x for x in push.force_in_world_N) ** 0.5)
         for c in push.force_in_world_N
@@ -111,7 +130,7 @@ def sweep_push(
 
     def survives(force_N: float) -> bool:
         spec = push.model_copy(update={"force_in_world_N": tuple(force_N * d for d in direction)})
-        scenario = base.model_copy(update={"pushes": [spec]})
+        scenario = base.model_copy(update={"pushes": [spec], "duration_s": duration_s})
         return not run_scenario(scenario, endpoint).fell
 
     low, high = 0.0, max_force_N
@@ -121,3 +140,42 @@ def sweep_push(
         middle = 0.5 * (low + high)
         low, high = (middle, high) if survives(middle) else (low, middle)
     return low
+
+
+def sweep_controllers(
+    scenario_name: str,
+    push: PushSpec,
+    directions: dict[str, tuple[float, float, float]],
+    endpoint: str,
+    overrides: dict[str, Any] | None = None,
+) -> dict[str, dict[str, float]]:
+    """:func:`sweep_push` for each of ``SWEEP_CONTROLLERS`` and each direction; prints a table.
+
+    The scenario's own pushes are removed; its parameters and parameter
+    changes are kept only for its own controller (they are written for it).
+    Returns label → direction → largest force survived (N).
+    """
+    own_controller = load_scenario(scenario_name).controller
+    header = "".join(f"{name:>16}" for name in directions)
+    print(f"{'largest push survived (N)':<32}{header}{'weakest':>10}{'× tracking':>12}")
+    results: dict[str, dict[str, float]] = {}
+    for label, (controller, params) in SWEEP_CONTROLLERS.items():
+        base = load_scenario(scenario_name, **{**(overrides or {}), "controller": controller})
+        own = controller == own_controller
+        base = base.model_copy(
+            update={
+                "params": {**(base.params if own else {}), **params},
+                "param_changes": base.param_changes if own else [],
+                "pushes": [],
+            }
+        )
+        results[label] = {
+            name: sweep_push(base, push.model_copy(update={"force_in_world_N": xyz}), endpoint)
+            for name, xyz in directions.items()
+        }
+        weakest = min(results[label].values())
+        baseline = min(next(iter(results.values())).values())
+        ratio = f"{weakest / baseline:.2f}×" if baseline > 0 else "-"
+        cells = "".join(f"{force:>16.1f}" for force in results[label].values())
+        print(f"{label:<32}{cells}{weakest:>10.1f}{ratio:>12}", flush=True)
+    return results

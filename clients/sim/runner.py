@@ -2,7 +2,10 @@
 
 Every control tick the runner reads the backend's state, sends it to the
 server (``state``), and applies the returned torques for the physics steps
-until the next tick (zero-order hold); the scenario's parameter changes go
+until the next tick (zero-order hold). With ``command_delay_ticks = 1`` the
+torques of tick k's command are held from tick k + 1 on, and the physics
+steps while the server computes (client and server run in parallel, one
+control period apart, as on hardware). The scenario's parameter changes go
 out as ``set_params`` at their tick. In ``measured`` ground-force mode it
 also sends the backend's contact wrenches (the thesis' penalty forces). The
 run stops early once the robot has fallen.
@@ -18,7 +21,7 @@ import numpy as np
 
 from clients.client import ControllerClient, ServerError
 from clients.layout import joint_slices, neutral_joint_position
-from clients.sim.backend import PhysicsBackend
+from clients.sim.backend import PhysicsBackend, Push
 from clients.sim.scenario import Scenario
 from clients.state import RobotState
 from protocol.messages import Command, Welcome
@@ -135,6 +138,16 @@ def support_flags(
     ]
 
 
+def _step_physics(
+    backend: PhysicsBackend, joint_torque: np.ndarray, pushes: list[Push], steps: int
+) -> bool:
+    """Hold ``joint_torque`` for ``steps`` physics steps; True if a non-foot body touched."""
+    non_foot_contact = False
+    for _ in range(steps):
+        non_foot_contact |= backend.step(joint_torque, pushes).non_foot_contact
+    return non_foot_contact
+
+
 def run_scenario(
     scenario: Scenario, endpoint: str, progress: Any = None, timeout_s: float = 10.0
 ) -> RunRecord:
@@ -164,6 +177,7 @@ def run_scenario(
         steps = scenario.physics_steps_per_control_tick
         changes = list(scenario.param_changes)
         flags = backend.contact_flags()  # at rest on the ground: every touching foot supports
+        held_torque = None  # with a command delay: the torques of the previous tick's command
         start = time.perf_counter()
         for tick in range(ticks):
             while changes and changes[0].time_s <= backend.time_s + 1e-9:
@@ -178,7 +192,15 @@ def run_scenario(
             )
             wrenches = all_wrenches if measured else None
             try:
-                command = client.step(state.to_message(backend.time_s, flags, wrenches))
+                client.send_state(state.to_message(backend.time_s, flags, wrenches))
+                if held_torque is None or not scenario.command_delay_ticks:
+                    command = client.receive_command()
+                    held_torque = command.joint_torque
+                    non_foot_contact = _step_physics(backend, held_torque, pushes, steps)
+                else:  # the physics runs while the server computes this state's command
+                    non_foot_contact = _step_physics(backend, held_torque, pushes, steps)
+                    command = client.receive_command()
+                    held_torque = command.joint_torque
             except ServerError as exc:  # no command for this state: the run ends here
                 record.fell, record.fall_time_s = True, backend.time_s
                 record.fall_reason = f"controller error {exc.code.name}: {exc.detail}"
@@ -187,10 +209,6 @@ def run_scenario(
             record.states.append(state)
             record.commands.append(command)
             record.contact_flags.append(flags)
-            non_foot_contact = False
-            for _ in range(steps):
-                report = backend.step(command.joint_torque, pushes)
-                non_foot_contact |= report.non_foot_contact
             reason = _fall_reason(backend.state(), standing_height_m, non_foot_contact)
             if reason:
                 record.fell, record.fall_time_s, record.fall_reason = True, backend.time_s, reason

@@ -67,6 +67,13 @@ class Scenario(BaseModel):
     duration_s: float = Field(default=3.0, gt=0.0, le=600.0)
     control_rate_hz: float = Field(default=1000.0, gt=0.0, le=10_000.0)
     physics_rate_hz: float = Field(default=1000.0, gt=0.0, le=100_000.0)
+    command_delay_ticks: Literal[0, 1] = Field(
+        default=0,
+        description="0: lockstep, each state's command drives the physics from that tick. "
+        "1: pipelined, the command for the state of tick k drives the physics from tick k + 1, "
+        "and the simulator steps while the server computes (one control period of latency, as "
+        "between sensing and actuation on hardware).",
+    )
     ground_force_mode: Literal["distributed", "measured"] = Field(default="distributed")
     support_force_threshold_N: float = Field(
         default=20.0,

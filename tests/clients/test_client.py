@@ -58,3 +58,24 @@ def test_server_errors_raise_typed_exceptions(server):
             client.set_params({"damping": "soft"})
         assert info.value.code == ErrorCode.INVALID_PARAMS
         assert any(s.model_name == "thesis_humanoid" for s in client.stats())
+
+
+def test_send_state_then_receive_command_matches_step(server):
+    """The split request returns the same command as `step`; misuse is a typed error."""
+    from protocol import PoiseError
+
+    rng = np.random.default_rng(1)
+    with ControllerClient(server.endpoint, timeout_s=10.0) as client:
+        welcome = client.connect("revolute_humanoid")
+        state = random_state(welcome, rng)
+        stepped = client.step(state)
+        client.send_state(state)
+        with pytest.raises(PoiseError, match="outstanding"):
+            client.send_state(state)
+        with pytest.raises(PoiseError, match="outstanding"):
+            client.set_params({"damping": 5.0})
+        received = client.receive_command()
+        assert received.seq == client.last_seq
+        np.testing.assert_allclose(received.joint_torque, stepped.joint_torque, rtol=1e-9)
+        with pytest.raises(PoiseError, match="send_state"):
+            client.receive_command()

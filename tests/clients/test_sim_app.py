@@ -103,3 +103,36 @@ def test_foot_slip_and_rotation_are_measured_only_while_supporting(server):
     assert rotation_rad == pytest.approx(0.1, rel=1e-9)
     record.contact_flags = [[True, True], [False, False]]
     assert _foot_slip_and_rotation(record) == (0.0, 0.0)
+
+
+def test_push_sweep_bisects_each_direction_and_waits_for_the_robot_to_settle(monkeypatch, capsys):
+    """The sweep's bookkeeping, with a stand-in run: a robot survives a push up to a
+    direction- and controller-dependent force, and only if the run lasts 3 s past it."""
+    import clients.sim.app as app
+
+    limits = {("momentum", 1.0): 300.0, ("momentum", -1.0): 150.0, ("prioritized", -1.0): 260.0}
+    durations = set()
+
+    class Run:
+        def __init__(self, scenario, endpoint):
+            (push,) = scenario.pushes
+            force_x = push.force_in_world_N[0]
+            params = scenario.params
+            # Tracking only gives up half of the momentum controller's margin.
+            scale = 0.5 if params.get("weight_linear_momentum") == 0.0 else 1.0
+            limit = limits.get((scenario.controller, np.sign(force_x)), 200.0) * scale
+            durations.add(scenario.duration_s)
+            self.fell = abs(force_x) > limit
+
+    monkeypatch.setattr(app, "run_scenario", Run)
+    push = app.PushSpec(body="chest", force_in_world_N=(1, 0, 0), start_s=0.5, duration_s=0.1)
+    directions = {"behind": (2.0, 0.0, 0.0), "front": (-1.0, 0.0, 0.0)}
+    results = app.sweep_controllers("stand", push, directions, "tcp://unused")
+
+    assert durations == {0.5 + 0.1 + 3.0}  # stand lasts 2 s: extended to settle
+    assert results["tracking only"]["behind"] == pytest.approx(150.0, abs=5.0)
+    assert results["tracking only"]["front"] == pytest.approx(75.0, abs=5.0)
+    assert results["+ linear momentum"]["front"] == pytest.approx(150.0, abs=5.0)
+    assert results["prioritized (de Lasa 2010)"]["front"] == pytest.approx(260.0, abs=5.0)
+    table = capsys.readouterr().out
+    assert "weakest" in table and "2.00×" in table  # + linear momentum: 150 / 75
