@@ -1,10 +1,13 @@
 """Real-time factor of the simulator client running against the server over ZeroMQ.
 
 For each backend: quiet standing of the thesis humanoid for a few simulated
-seconds with the server's `momentum` controller answering every 1 ms tick,
-against two baselines measured in the same run: the backend stepping alone
-(zero torques, no server), and the same loop with the optimizer every 5th
-tick (the thesis runs it at 30–200 Hz; inverse dynamics still every tick).
+seconds with the server's `momentum` controller answering every 1 ms tick:
+in lockstep (the simulator waits for each command), pipelined (the command
+for tick k drives the physics from tick k + 1, and the simulator steps while
+the server computes; `command_delay_ticks = 1`), and pipelined with the
+optimizer every 5th tick (the thesis runs it at 30–200 Hz; inverse dynamics
+still every tick). The baseline, measured in the same run, is the backend
+stepping alone (zero torques, no server).
 
 Usage: python bench/sim_realtime.py [--seconds 2]
 """
@@ -36,23 +39,30 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=2.0)
     args = parser.parse_args()
-    print(f"{'backend':<11}{'physics alone':>15}{'server 1 kHz':>14}{'optimizer 200 Hz':>18}")
+    columns = {
+        "lockstep": {},
+        "pipelined": {"command_delay_ticks": 1},
+        "pipelined, opt. 200 Hz": {"command_delay_ticks": 1, "optimizer_period_ticks": 5},
+    }
+    print(f"{'backend':<11}{'physics alone':>15}" + "".join(f"{c:>24}" for c in columns))
     with ServerProcess() as server:
         for backend in ("reference", "mujoco"):
             scenario = load_scenario("stand", backend=backend, duration_s=args.seconds)
-            full = run_scenario(scenario, server.endpoint)
-            decimated = run_scenario(
-                scenario.model_copy(
-                    update={"params": {**scenario.params, "optimizer_period_ticks": 5}}
-                ),
-                server.endpoint,
-            )
-            alone = physics_alone_rtf(scenario, full.welcome, args.seconds)
-            full_rtf = f"{full.real_time_factor:.2f}x" + (" fell" if full.fell else "")
-            decimated_rtf = f"{decimated.real_time_factor:.2f}x" + (
-                " fell" if decimated.fell else ""
-            )
-            print(f"{backend:<11}{alone:>14.2f}x{full_rtf:>14}{decimated_rtf:>18}")
+            cells = []
+            for overrides in columns.values():
+                params = {k: v for k, v in overrides.items() if k != "command_delay_ticks"}
+                run = run_scenario(
+                    scenario.model_copy(
+                        update={
+                            "params": {**scenario.params, **params},
+                            "command_delay_ticks": overrides.get("command_delay_ticks", 0),
+                        }
+                    ),
+                    server.endpoint,
+                )
+                cells.append(f"{run.real_time_factor:.2f}x" + (" fell" if run.fell else ""))
+            alone = physics_alone_rtf(scenario, run.welcome, args.seconds)
+            print(f"{backend:<11}{alone:>14.2f}x" + "".join(f"{c:>24}" for c in cells))
     print("real-time factor = simulated time / wall-clock time; ≥ 1 is real time")
 
 

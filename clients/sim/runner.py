@@ -183,14 +183,17 @@ def run_scenario(
             while changes and changes[0].time_s <= backend.time_s + 1e-9:
                 client.set_params(changes.pop(0).params)
             state = backend.state()
-            all_wrenches = backend.contact_wrenches_in_world()
+            touching = backend.contact_flags()
+            # The wrenches cost MuJoCo a contact-force call per contact: read them only
+            # when they are sent or decide whether a touching foot becomes a support.
+            wrenches = None
+            if measured or any(t and not f for t, f in zip(touching, flags, strict=True)):
+                wrenches = backend.contact_wrenches_in_world()
+            normal_force_N = np.zeros(len(touching)) if wrenches is None else wrenches[:, 2]
             flags = support_flags(
-                flags,
-                backend.contact_flags(),
-                all_wrenches[:, 2],
-                scenario.support_force_threshold_N,
+                flags, touching, normal_force_N, scenario.support_force_threshold_N
             )
-            wrenches = all_wrenches if measured else None
+            wrenches = wrenches if measured else None
             try:
                 client.send_state(state.to_message(backend.time_s, flags, wrenches))
                 if held_torque is None or not scenario.command_delay_ticks:

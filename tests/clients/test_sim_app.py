@@ -136,3 +136,33 @@ def test_push_sweep_bisects_each_direction_and_waits_for_the_robot_to_settle(mon
     assert results["prioritized (de Lasa 2010)"]["front"] == pytest.approx(260.0, abs=5.0)
     table = capsys.readouterr().out
     assert "weakest" in table and "2.00×" in table  # + linear momentum: 150 / 75
+
+
+@pytest.mark.parametrize("delay", [0, 1])
+def test_command_delay_holds_each_command_from_the_next_tick(server, monkeypatch, delay):
+    """Lockstep applies tick k's command at tick k; pipelined at tick k + 1 (tick 0's at 0)."""
+    import clients.sim.runner as runner
+
+    applied = []
+    make_backend = runner.make_backend
+
+    def recording_backend(scenario):
+        backend = make_backend(scenario)
+        step = backend.step
+
+        def recorded_step(joint_torque, pushes):
+            applied.append(np.array(joint_torque))
+            return step(joint_torque, pushes)
+
+        backend.step = recorded_step
+        return backend
+
+    monkeypatch.setattr(runner, "make_backend", recording_backend)
+    scenario = load_scenario("stand", backend="mujoco", duration_s=0.05, command_delay_ticks=delay)
+    record = runner.run_scenario(scenario, server.endpoint)
+    sent = [command.joint_torque for command in record.commands]
+    assert len(applied) == len(sent) == 50
+    expected = sent if delay == 0 else [sent[0], *sent[:-1]]
+    for torque, command_torque in zip(applied, expected, strict=True):
+        np.testing.assert_array_equal(torque, command_torque)
+    assert not np.array_equal(sent[1], sent[2])  # the commands differ tick to tick
