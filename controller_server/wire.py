@@ -15,6 +15,7 @@ import pinocchio as pin
 
 from controller_server.controllers import ControlInput, ControlOutput
 from controller_server.models import RobotModel
+from controller_server.spatial import cross
 from protocol.errors import ErrorCode, ProtocolError
 from protocol.messages import Command, Diagnostics, PriorityLevelReport, State
 
@@ -99,7 +100,7 @@ def command_from_output(
     """
     q, v, a = control_input.q, control_input.v, output.acceleration
     rotation_base_to_world = pin.Quaternion(q[3:7]).toRotationMatrix()
-    linear_acceleration_in_world = rotation_base_to_world @ (a[:3] + np.cross(v[3:6], v[:3]))
+    linear_acceleration_in_world = rotation_base_to_world @ (a[:3] + cross(v[3:6], v[:3]))
     arrays = {
         "joint_acceleration": a[6:],
         "base_linear_acceleration_in_world": linear_acceleration_in_world,
