@@ -11,8 +11,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from controller_server.spatial import cross
-
 if TYPE_CHECKING:
     from controller_server.dynamics import DynamicsTerms
 
@@ -95,14 +93,22 @@ def ground_reference_points(
     if contact_wrench_in_world is None:
         nan = np.full(3, np.nan)
         return nan, nan
-    wrenches = np.asarray(contact_wrench_in_world).reshape(-1, 6)
-    origins = terms.position_contact_frames_in_world
-    reference = origins[list(supports)].mean(axis=0) if any(supports) else origins.mean(axis=0)
-    force = wrenches[:, :3].sum(axis=0)
-    torque = (wrenches[:, 3:] + cross(origins - reference, wrenches[:, :3])).sum(axis=0)
+    # A handful of contacts: scalar arithmetic beats numpy's per-call overhead here.
+    wrenches = np.asarray(contact_wrench_in_world).reshape(-1, 6).tolist()
+    origins = terms.position_contact_frames_in_world.tolist()
+    chosen = [o for o, on in zip(origins, supports, strict=True) if on] or origins
+    cx, cy, cz = (sum(axis) / len(chosen) for axis in zip(*chosen, strict=True))
+    force, torque = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+    for (fx, fy, fz, tx, ty, tz), (ox, oy, oz) in zip(wrenches, origins, strict=True):
+        rx, ry, rz = ox - cx, oy - cy, oz - cz  # torque about the reference: τ + r × f
+        force[0], force[1], force[2] = force[0] + fx, force[1] + fy, force[2] + fz
+        torque[0] += tx + ry * fz - rz * fy
+        torque[1] += ty + rz * fx - rx * fz
+        torque[2] += tz + rx * fy - ry * fx
+    total_force = np.array(force)
     return (
-        center_of_pressure(force, torque, reference, ground_height),
-        centroidal_moment_pivot(terms.position_com_in_world, force, ground_height),
+        center_of_pressure(total_force, np.array(torque), np.array([cx, cy, cz]), ground_height),
+        centroidal_moment_pivot(terms.position_com_in_world, total_force, ground_height),
     )
 
 

@@ -53,6 +53,8 @@ class DynamicsTerms:
             angular acceleration at ``q̈ = 0``).
         point_jacobians: Per contact, ``(3k, nv)``: velocity of each point in world axes.
         point_drifts: Per contact, ``(3k,)``: point acceleration at ``q̈ = 0``.
+        point_wrench_maps: Per contact, ``(6, 3k)``: point forces (world axes) to
+            the contact wrench about the frame origin (see :class:`PointKinematics`).
         position_points_in_world: Per contact, ``(k, 3)`` point positions (m).
         position_contact_frames_in_world: ``(contacts, 3)`` contact frame origins (m).
         momentum: Momentum derivative matrices and momenta (App. B).
@@ -68,6 +70,7 @@ class DynamicsTerms:
     support_drifts: tuple[np.ndarray, ...]
     point_jacobians: tuple[np.ndarray, ...]
     point_drifts: tuple[np.ndarray, ...]
+    point_wrench_maps: tuple[np.ndarray, ...]
     position_points_in_world: tuple[np.ndarray, ...]
     position_contact_frames_in_world: np.ndarray
     momentum: MomentumRates
@@ -83,12 +86,17 @@ class PointKinematics:
         velocity_in_world: ``(k, 3)`` (m/s).
         jacobian: ``(3k, nv)``, ``ṗ = J q̇`` stacked per point.
         drift: ``(3k,)``, ``p̈`` at ``q̈ = 0`` (App. C, eq. C.7 ``q_bias``).
+        wrench_map: ``(6, 3k)`` ``W = [I … I; [r₁]× … [r_k]×]`` with ``r`` the
+            points' offsets from the frame origin in world axes: forces ``f``
+            at the points make the wrench ``W f = [Σ f; Σ r × f]`` about the
+            origin, and by duality ``J = Wᵀ J_frame``.
     """
 
     position_in_world: np.ndarray
     velocity_in_world: np.ndarray
     jacobian: np.ndarray
     drift: np.ndarray
+    wrench_map: np.ndarray
 
 
 def point_kinematics(
@@ -108,11 +116,6 @@ def point_kinematics(
     )
 
 
-_SKEW_INDEX = np.array([[3, 2, 1], [2, 3, 0], [1, 0, 3]])
-_SKEW_SIGN = np.array([[0.0, -1.0, 1.0], [1.0, 0.0, -1.0], [-1.0, 1.0, 0.0]])
-"""``[r]× = r_ext[_SKEW_INDEX] * _SKEW_SIGN`` with ``r_ext = [x, y, z, 0]`` (eq. A.4)."""
-
-
 def _points_on_frame(
     jacobian: np.ndarray,
     velocity: pin.Motion,
@@ -124,21 +127,26 @@ def _points_on_frame(
 
     Per point ``p = o + r``: ``v_p = v_o − [r]× ω`` and, at ``q̈ = 0``,
     ``a_p = a_o − [r]× α + ω × (ω × r)`` (App. C, eq. C.3 and C.7), all ``k``
-    points at once.
+    points at once through the wrench map ``Wᵀ = [I, −[r]×]`` per point.
     """
     offsets = points_in_frame @ placement.rotation.T  # (k, 3), world axes
     count = len(offsets)
-    extended = np.zeros((count, 4))
-    extended[:, :3] = offsets
-    lever = extended[:, _SKEW_INDEX] * _SKEW_SIGN  # (k, 3, 3): [r]× per point
+    x, y, z = offsets.T
+    wrench_map = np.zeros((6, 3 * count))
+    wrench_map[0, 0::3] = wrench_map[1, 1::3] = wrench_map[2, 2::3] = 1.0
+    wrench_map[3, 1::3], wrench_map[3, 2::3] = -z, y
+    wrench_map[4, 0::3], wrench_map[4, 2::3] = z, -x
+    wrench_map[5, 0::3], wrench_map[5, 1::3] = -y, x
     omega = velocity.angular
-    # ω × (ω × r) = (ω · r) ω − |ω|² r
-    centripetal = (offsets @ omega)[:, None] * omega - (omega @ omega) * offsets
+    # ω × (ω × r) = (ω ωᵀ − |ω|² I) r
+    centripetal = offsets @ (np.outer(omega, omega) - (omega @ omega) * np.eye(3))
+    transposed = wrench_map.T
     return PointKinematics(
         position_in_world=placement.translation + offsets,
-        velocity_in_world=velocity.linear - lever @ omega,
-        jacobian=(jacobian[:3] - lever @ jacobian[3:]).reshape(3 * count, -1),
-        drift=(drift.linear - lever @ drift.angular + centripetal).reshape(-1),
+        velocity_in_world=(transposed @ velocity.vector).reshape(count, 3),
+        jacobian=transposed @ jacobian,
+        drift=transposed @ drift.vector + centripetal.reshape(-1),
+        wrench_map=wrench_map,
     )
 
 
@@ -176,7 +184,7 @@ def compute_dynamics_terms(
     pin.updateFramePlacements(model, data)
 
     support_jacobians, support_drifts = [], []
-    point_jacobians, point_drifts, point_positions = [], [], []
+    point_jacobians, point_drifts, point_positions, wrench_maps = [], [], [], []
     for contact in robot.contacts:
         frame_id = contact.frame_id
         jacobian = pin.getFrameJacobian(model, data, frame_id, WORLD_ALIGNED)
@@ -193,6 +201,7 @@ def compute_dynamics_terms(
         point_jacobians.append(points.jacobian)
         point_drifts.append(points.drift)
         point_positions.append(points.position_in_world)
+        wrench_maps.append(points.wrench_map)
 
     return DynamicsTerms(
         q=q,
@@ -204,6 +213,7 @@ def compute_dynamics_terms(
         support_drifts=tuple(support_drifts),
         point_jacobians=tuple(point_jacobians),
         point_drifts=tuple(point_drifts),
+        point_wrench_maps=tuple(wrench_maps),
         position_points_in_world=tuple(point_positions),
         position_contact_frames_in_world=np.array(
             [data.oMf[c.frame_id].translation for c in robot.contacts]

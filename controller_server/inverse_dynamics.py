@@ -34,7 +34,6 @@ import qpsolvers
 import scipy.linalg
 
 from controller_server.dynamics import DynamicsTerms
-from controller_server.spatial import cross
 
 __all__ = [
     "InverseDynamicsResult",
@@ -139,7 +138,7 @@ def solve_inverse_dynamics(
         )
 
     point_jacobian, mus = _support_points(terms, supports, friction_coefficients, counts)
-    mask = np.concatenate([np.full(count, on) for count, on in zip(counts, supports, strict=True)])
+    mask = np.repeat(np.asarray(supports, dtype=bool), counts)
     generalized_force = M @ acceleration + h
     solution = None
     if point_jacobian.shape[0]:
@@ -239,8 +238,8 @@ def minimum_norm_balance(
         forces = G.T @ np.linalg.solve(G @ G.T, wrench)
     except np.linalg.LinAlgError:
         return None
-    cones = friction_pyramid(friction_coefficients)
-    if np.all(cones @ forces <= 1e-9 * max(1.0, abs(wrench[2]))):
+    cones = _friction_pyramid(tuple(friction_coefficients))  # read only: no copy
+    if (cones @ forces <= 1e-9 * max(1.0, abs(wrench[2]))).all():
         return forces
     return None
 
@@ -344,12 +343,11 @@ def nearest_feasible_motion(
 def wrenches_from_point_forces(
     terms: DynamicsTerms, forces: np.ndarray, counts: Sequence[int]
 ) -> np.ndarray:
-    """Per contact: total force and torque about the contact frame origin."""
-    owner = np.repeat(np.arange(len(counts)), counts)
-    offsets = (
-        np.vstack(terms.position_points_in_world) - terms.position_contact_frames_in_world[owner]
-    )
-    per_point = np.hstack([forces, cross(offsets, forces)])
-    wrenches = np.zeros((len(counts), 6))
-    np.add.at(wrenches, owner, per_point)
-    return wrenches
+    """Per contact: total force and torque about the contact frame origin, ``(contacts, 6)``."""
+    ends = np.cumsum(counts)
+    return np.array(
+        [
+            wrench_map @ forces[end - count : end].reshape(-1)
+            for wrench_map, count, end in zip(terms.point_wrench_maps, counts, ends, strict=True)
+        ]
+    ).reshape(-1, 6)

@@ -457,6 +457,7 @@ class MomentumController(Controller):
         self._last_flags = flags
         self._last_optimizer = {
             "objectives": objectives,
+            "objective_residuals": {o.name: o.residual(solution.x) for o in objectives},
             "linear_momentum_rate_desired": desired_rate,
             "angular_momentum_weight": angular_weight,
             "angular_momentum_rate_desired": (
@@ -496,7 +497,11 @@ class MomentumController(Controller):
             "supports": list(flags),
             "support_polygon_xy": polygon.reshape(-1),
             "angular_momentum_weight": self._last_optimizer["angular_momentum_weight"],
-            "objective_residuals": {o.name: o.residual(acceleration) for o in objectives},
+            "objective_residuals": (
+                self._last_optimizer["objective_residuals"]
+                if np.array_equal(acceleration, solution.x)  # realized as optimized
+                else {o.name: o.residual(acceleration) for o in objectives}
+            ),
             "objective_condition_number": solution.objective_condition_number,
             "schur_condition_number": solution.schur_condition_number,
             "objective_damping": solution.objective_damping,
