@@ -7,12 +7,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from controller_server.dynamics import DynamicsTerms
 
 __all__ = [
     "center_of_pressure",
@@ -75,7 +71,8 @@ def centroidal_moment_pivot(
 
 
 def ground_reference_points(
-    terms: DynamicsTerms,
+    position_contact_frames_in_world: np.ndarray,
+    position_com_in_world: np.ndarray,
     contact_wrench_in_world: np.ndarray | None,
     supports: Sequence[bool],
     ground_height: float,
@@ -83,7 +80,8 @@ def ground_reference_points(
     """COP and CMP of the contacts' ground wrenches (NaN without ground force).
 
     Args:
-        terms: Dynamics at the current state (contact frame origins, CM).
+        position_contact_frames_in_world: ``(contacts, 3)`` contact frame origins (m).
+        position_com_in_world: Centre of mass (m).
         contact_wrench_in_world: ``(contacts, 6)`` force and torque about each
             contact frame origin, or ``None``.
         supports: One flag per contact; the wrenches are summed about the
@@ -95,7 +93,7 @@ def ground_reference_points(
         return nan, nan
     # A handful of contacts: scalar arithmetic beats numpy's per-call overhead here.
     wrenches = np.asarray(contact_wrench_in_world).reshape(-1, 6).tolist()
-    origins = terms.position_contact_frames_in_world.tolist()
+    origins = np.asarray(position_contact_frames_in_world).tolist()
     chosen = [o for o, on in zip(origins, supports, strict=True) if on] or origins
     cx, cy, cz = (sum(axis) / len(chosen) for axis in zip(*chosen, strict=True))
     force, torque = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
@@ -108,7 +106,7 @@ def ground_reference_points(
     total_force = np.array(force)
     return (
         center_of_pressure(total_force, np.array(torque), np.array([cx, cy, cz]), ground_height),
-        centroidal_moment_pivot(terms.position_com_in_world, total_force, ground_height),
+        centroidal_moment_pivot(position_com_in_world, total_force, ground_height),
     )
 
 

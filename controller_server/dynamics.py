@@ -32,7 +32,16 @@ import pinocchio as pin
 from controller_server.models import RobotModel
 from controller_server.momentum import MomentumRates, compute_momentum_rates
 
-__all__ = ["DynamicsTerms", "PointKinematics", "compute_dynamics_terms", "point_kinematics"]
+__all__ = [
+    "CentroidalMotion",
+    "ContactGeometry",
+    "DynamicsTerms",
+    "PointKinematics",
+    "centroidal_motion",
+    "compute_contact_geometry",
+    "compute_dynamics_terms",
+    "point_kinematics",
+]
 
 WORLD_ALIGNED = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -220,4 +229,66 @@ def compute_dynamics_terms(
         ).reshape(-1, 3),
         momentum=momentum,
         total_mass=total_mass,
+    )
+
+
+@dataclass(frozen=True)
+class ContactGeometry:
+    """Where the contacts are at ``q``: enough for the 1 kHz inverse-dynamics tick.
+
+    Attributes:
+        position_points_in_world: Per contact, ``(k, 3)`` point positions (m).
+        position_contact_frames_in_world: ``(contacts, 3)`` contact frame origins (m).
+        joint_ids: Per contact, the Pinocchio joint that carries its frame.
+    """
+
+    position_points_in_world: tuple[np.ndarray, ...]
+    position_contact_frames_in_world: np.ndarray
+    joint_ids: tuple[int, ...]
+
+
+def compute_contact_geometry(robot: RobotModel, data: pin.Data, q: np.ndarray) -> ContactGeometry:
+    """Contact points and frame origins by forward kinematics (overwrites ``data``)."""
+    model = robot.model
+    pin.forwardKinematics(model, data, q)
+    points, origins, joints = [], [], []
+    for contact in robot.contacts:
+        placement = pin.updateFramePlacement(model, data, contact.frame_id)
+        origin = placement.translation
+        points.append(origin + contact.points_in_frame @ placement.rotation.T)
+        origins.append(origin)
+        joints.append(model.frames[contact.frame_id].parentJoint)
+    return ContactGeometry(tuple(points), np.array(origins).reshape(-1, 3), tuple(joints))
+
+
+@dataclass(frozen=True)
+class CentroidalMotion:
+    """Centre of mass, centroidal momentum and its rate for one ``q̈`` (world axes, about the CM).
+
+    Attributes:
+        position_com_in_world: ``c`` (m).
+        linear_momentum: ``L = m ċ`` (kg·m/s).
+        angular_momentum: ``H`` about the CM (kg·m²/s).
+        linear_momentum_rate: ``L̇ = R q̈ + r_bias`` (N; App. B).
+        angular_momentum_rate: ``Ḣ = S q̈ + s_bias`` (N·m; App. B).
+    """
+
+    position_com_in_world: np.ndarray
+    linear_momentum: np.ndarray
+    angular_momentum: np.ndarray
+    linear_momentum_rate: np.ndarray
+    angular_momentum_rate: np.ndarray
+
+
+def centroidal_motion(
+    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, acceleration: np.ndarray
+) -> CentroidalMotion:
+    """:class:`CentroidalMotion` by Pinocchio's centroidal momentum time variation."""
+    rate = pin.computeCentroidalMomentumTimeVariation(model, data, q, v, acceleration)
+    return CentroidalMotion(
+        position_com_in_world=data.com[0].copy(),
+        linear_momentum=data.hg.linear.copy(),
+        angular_momentum=data.hg.angular.copy(),
+        linear_momentum_rate=rate.linear.copy(),
+        angular_momentum_rate=rate.angular.copy(),
     )

@@ -20,20 +20,29 @@ QP finds the nearest motion that can, with its forces and torques
 (:func:`nearest_feasible_motion`). Either way the returned acceleration is
 the one ``τ`` and ``f`` really produce, ``q̈ = M⁻¹ (Sᵀ τ + J_cᵀ f − h)``, so
 the command is always dynamically consistent.
+
+Between optimizer runs (the thesis' 1 kHz inverse-dynamics loop, ch. 4.3)
+:func:`exact_inverse_dynamics` computes the common case with two calls of
+Pinocchio's RNEA and no mass matrix, and defers to
+:func:`solve_inverse_dynamics` otherwise.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 
 import numpy as np
+import pinocchio as pin
 import qpsolvers
 import scipy.linalg
+import scipy.linalg.lapack
 
-from controller_server.dynamics import DynamicsTerms
+from controller_server.dynamics import ContactGeometry, DynamicsTerms
+from controller_server.models import RobotModel
 
 __all__ = [
     "InverseDynamicsResult",
@@ -234,10 +243,10 @@ def minimum_norm_balance(
     are admissible they also solve ``min ‖f‖² s.t. G f = w, f in cones`` (the
     common case when standing), with no solver call.
     """
-    try:
-        forces = G.T @ np.linalg.solve(G @ G.T, wrench)
-    except np.linalg.LinAlgError:
+    _, multipliers, info = scipy.linalg.lapack.dposv(G @ G.T, wrench)  # Cholesky solve
+    if info != 0:  # G G^T not positive definite: the points cannot balance every wrench
         return None
+    forces = G.T @ multipliers
     cones = _friction_pyramid(tuple(friction_coefficients))  # read only: no copy
     if (cones @ forces <= 1e-9 * max(1.0, abs(wrench[2]))).all():
         return forces
@@ -351,3 +360,102 @@ def wrenches_from_point_forces(
             for wrench_map, count, end in zip(terms.point_wrench_maps, counts, ends, strict=True)
         ]
     ).reshape(-1, 6)
+
+
+def exact_inverse_dynamics(
+    robot: RobotModel,
+    data: pin.Data,
+    q: np.ndarray,
+    v: np.ndarray,
+    acceleration: np.ndarray,
+    geometry: ContactGeometry,
+    supports: Sequence[bool],
+    friction_coefficients: Sequence[float],
+    torque_limit: np.ndarray,
+) -> InverseDynamicsResult | None:
+    """The exact case of :func:`solve_inverse_dynamics` by RNEA, or ``None``.
+
+    RNEA gives ``M q̈ + h``; its root rows are the wrench the root needs (base
+    axes, about the base origin ``o``). In world axes a point force ``f`` at
+    ``p`` supplies ``[f; (p − o) × f]`` of it. The smallest support-point
+    forces that supply it all are those of :func:`minimum_norm_balance` (a
+    rotation of the rows leaves the minimum-norm solution unchanged). RNEA
+    again, with these forces as external forces, gives
+    ``τ = (M q̈ + h − J_cᵀ f)_joints``.
+
+    Args:
+        robot: The robot (root joint 1, a free flyer).
+        data: Pinocchio data (overwritten).
+        q: Configuration, ``(nq,)``.
+        v: Generalized velocity, ``(nv,)``.
+        acceleration: ``q̈`` to realize, ``(nv,)``.
+        geometry: Contact points at ``q`` (:func:`compute_contact_geometry`).
+        supports: One flag per contact.
+        friction_coefficients: μ per contact.
+        torque_limit: ``(nv − 6,)`` symmetric limits.
+
+    Returns:
+        The result with ``acceleration`` unchanged, or ``None`` when there is
+        no support, the forces leave the friction pyramids, or ``τ`` exceeds
+        its limits: then only the full solve (its QP) can answer.
+    """
+    if not any(supports):
+        return None
+    model = robot.model
+    root_in_base = pin.rnea(model, data, q, v, acceleration)[:NUM_ROOT_DOFS]
+    root = data.oMi[1]
+    origin = root.translation
+    wrench_in_world = (root_in_base.reshape(2, 3) @ root.rotation.T).reshape(-1)
+    points = geometry.position_points_in_world
+    chosen = [index for index, on in enumerate(supports) if on]
+    offsets = np.concatenate([points[index] for index in chosen]) - origin
+    x, y, z = offsets.T
+    balance = np.zeros((NUM_ROOT_DOFS, 3 * len(offsets)))  # [f; r × f] per point
+    balance[0, 0::3] = balance[1, 1::3] = balance[2, 2::3] = 1.0
+    balance[3, 1::3], balance[3, 2::3] = -z, y
+    balance[4, 0::3], balance[4, 2::3] = z, -x
+    balance[5, 0::3], balance[5, 1::3] = -y, x
+    mus = [friction_coefficients[index] for index in chosen for _ in points[index]]
+    solution = minimum_norm_balance(balance, wrench_in_world, mus)
+    if solution is None:
+        return None
+    counts = [len(p) for p in points]
+    starts = list(itertools.accumulate(counts, initial=0))
+    forces = np.zeros((starts[-1], 3))
+    wrenches = np.zeros((len(counts), 6))
+    external = list(_zero_forces(model.njoints))
+    ox, oy, oz = origin.tolist()
+    column = 0
+    for index in chosen:
+        count = counts[index]
+        point_forces = solution[column : column + 3 * count]
+        forces[starts[index] : starts[index + 1]] = point_forces.reshape(-1, 3)
+        # Force, and moment about the base origin, of this contact's points.
+        fx, fy, fz, mx, my, mz = (balance[:, column : column + 3 * count] @ point_forces).tolist()
+        column += 3 * count
+        force = np.array([fx, fy, fz])
+        # Moment about the world origin: + o × F; about the contact frame origin c: − (c − o) × F.
+        about_world = np.array(
+            [mx + oy * fz - oz * fy, my + oz * fx - ox * fz, mz + ox * fy - oy * fx]
+        )
+        cx, cy, cz = (geometry.position_contact_frames_in_world[index] - origin).tolist()
+        wrenches[index] = [
+            fx,
+            fy,
+            fz,
+            mx - cy * fz + cz * fy,
+            my - cz * fx + cx * fz,
+            mz - cx * fy + cy * fx,
+        ]
+        joint = geometry.joint_ids[index]
+        external[joint] = external[joint] + data.oMi[joint].actInv(pin.Force(force, about_world))
+    torque = pin.rnea(model, data, q, v, acceleration, external)[NUM_ROOT_DOFS:]
+    if not (np.abs(torque) <= torque_limit).all():
+        return None
+    return InverseDynamicsResult(torque, forces, wrenches, acceleration.copy(), 0.0, 0)
+
+
+@cache
+def _zero_forces(count: int) -> tuple[pin.Force, ...]:
+    """``count`` zero spatial forces (shared, never mutated: entries are replaced)."""
+    return tuple(pin.Force.Zero() for _ in range(count))

@@ -43,7 +43,14 @@ from controller_server.controllers.base import (
     normalized_configuration_part,
     vector_value,
 )
-from controller_server.dynamics import DynamicsTerms, compute_dynamics_terms, point_kinematics
+from controller_server.dynamics import (
+    CentroidalMotion,
+    DynamicsTerms,
+    centroidal_motion,
+    compute_contact_geometry,
+    compute_dynamics_terms,
+    point_kinematics,
+)
 from controller_server.errors import InvalidParams
 from controller_server.features import (
     MotionClip,
@@ -61,7 +68,11 @@ from controller_server.features import (
     load_motion_clip,
     soft_limit_gains,
 )
-from controller_server.inverse_dynamics import InverseDynamicsResult, solve_inverse_dynamics
+from controller_server.inverse_dynamics import (
+    InverseDynamicsResult,
+    exact_inverse_dynamics,
+    solve_inverse_dynamics,
+)
 from controller_server.models import RobotModel
 from controller_server.solvers import KKTSolution, build_weighted_problem, solve_weighted_kkt
 
@@ -303,48 +314,77 @@ class MomentumController(Controller):
     # One tick -------------------------------------------------------------------
 
     def compute(self, control_input: ControlInput) -> ControlOutput:
-        """Optimizer (every N-th tick or when supports change), then inverse dynamics."""
+        """Optimizer (every N-th tick or when supports change), then inverse dynamics.
+
+        Between optimizer runs the last ``q̈`` is realized by
+        :func:`exact_inverse_dynamics` (two RNEA passes: the thesis' 1 kHz
+        inverse-dynamics loop, ch. 4.3); the full terms are computed only when
+        the optimizer runs, in measured mode, or when that exact case fails.
+        """
         p = self._params
-        terms = compute_dynamics_terms(self.robot, self._data, control_input.q, control_input.v)
+        robot, q, v = self.robot, control_input.q, control_input.v
         measured = p["ground_force_mode"] == "measured"
         if measured and control_input.contact_wrench_in_world is None:
             raise InvalidParams(
                 "contact_wrench_in_world", "required in ground_force_mode 'measured'"
             )
         flags = self.supports(control_input)
-        supporting = [
-            pts for pts, on in zip(terms.position_points_in_world, flags, strict=True) if on
-        ]
-        polygon = support_polygon(np.vstack(supporting)) if supporting else np.zeros((0, 2))
         run_optimizer = (
             self._last_solution is None
             or flags != self._last_flags
             or self._ticks % p["optimizer_period_ticks"] == 0
         )
         self._ticks += 1
-        if run_optimizer:
-            wrenches = control_input.contact_wrench_in_world if measured else self._last_wrenches
-            self._optimize(control_input, terms, wrenches, flags, polygon)
-        solution = self._last_solution
-        assert solution is not None
-        dynamics = solve_inverse_dynamics(
-            terms,
-            solution.x,
-            flags,
-            list(p["friction_coefficients"]),
-            self.robot.torque_limit,
-            measured_wrenches=control_input.contact_wrench_in_world if measured else None,
-            force_regularization=p["force_regularization"],
-            support_weight=p["support_weight"],
-            qp_solver=p["qp_solver"],
-        )
+        friction = list(p["friction_coefficients"])
+        dynamics = None
+        if not run_optimizer and not measured:
+            assert self._last_solution is not None
+            geometry = compute_contact_geometry(robot, self._data, q)
+            dynamics = exact_inverse_dynamics(
+                robot,
+                self._data,
+                q,
+                v,
+                self._last_solution.x,
+                geometry,
+                flags,
+                friction,
+                robot.torque_limit,
+            )
+            points, origins = (
+                geometry.position_points_in_world,
+                geometry.position_contact_frames_in_world,
+            )
+            polygon = _support_polygon(points, flags)
+        if dynamics is None:
+            terms = compute_dynamics_terms(robot, self._data, q, v)
+            points, origins = terms.position_points_in_world, terms.position_contact_frames_in_world
+            polygon = _support_polygon(points, flags)
+            if run_optimizer:
+                wrenches = (
+                    control_input.contact_wrench_in_world if measured else self._last_wrenches
+                )
+                self._optimize(control_input, terms, wrenches, flags, polygon)
+            assert self._last_solution is not None
+            dynamics = solve_inverse_dynamics(
+                terms,
+                self._last_solution.x,
+                flags,
+                friction,
+                robot.torque_limit,
+                measured_wrenches=control_input.contact_wrench_in_world if measured else None,
+                force_regularization=p["force_regularization"],
+                support_weight=p["support_weight"],
+                qp_solver=p["qp_solver"],
+            )
         self._last_wrenches = dynamics.contact_wrench_in_world
+        motion = centroidal_motion(robot.model, self._data, q, v, dynamics.acceleration)
         return ControlOutput(
             acceleration=dynamics.acceleration,
             joint_torque=dynamics.joint_torque,
             contact_force_in_world=dynamics.contact_force_in_world,
             contact_wrench_in_world=dynamics.contact_wrench_in_world,
-            diagnostics=self._diagnostics(terms, dynamics, flags, polygon, run_optimizer),
+            diagnostics=self._diagnostics(motion, origins, dynamics, flags, polygon, run_optimizer),
         )
 
     def _reference(self, control_input: ControlInput) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -430,7 +470,13 @@ class MomentumController(Controller):
                     momentum, mass, desired_rate, p["weight_linear_momentum"]
                 )
             )
-        cop, cmp_ = ground_reference_points(terms, wrenches, flags, p["ground_height"])
+        cop, cmp_ = ground_reference_points(
+            terms.position_contact_frames_in_world,
+            terms.position_com_in_world,
+            wrenches,
+            flags,
+            p["ground_height"],
+        )
         angular_weight = angular_momentum_weight(
             p["angular_momentum_gain"], cop, cmp_, p["weight_angular_momentum"]
         )
@@ -469,7 +515,8 @@ class MomentumController(Controller):
 
     def _diagnostics(
         self,
-        terms: DynamicsTerms,
+        motion: CentroidalMotion,
+        position_contact_frames_in_world: np.ndarray,
         dynamics: InverseDynamicsResult,
         flags: tuple[bool, ...],
         polygon: np.ndarray,
@@ -477,21 +524,25 @@ class MomentumController(Controller):
     ) -> dict[str, Any]:
         solution = self._last_solution
         assert solution is not None
-        momentum, acceleration = terms.momentum, dynamics.acceleration
+        acceleration = dynamics.acceleration
         objectives: list[Objective] = self._last_optimizer["objectives"]
         cop, cmp_ = ground_reference_points(
-            terms, dynamics.contact_wrench_in_world, flags, self._params["ground_height"]
+            position_contact_frames_in_world,
+            motion.position_com_in_world,
+            dynamics.contact_wrench_in_world,
+            flags,
+            self._params["ground_height"],
         )
         return {
             "optimizer_ran": optimizer_ran,
-            "position_com_in_world": terms.position_com_in_world,
-            "velocity_com_in_world": momentum.linear_momentum / terms.total_mass,
-            "linear_momentum": momentum.linear_momentum,
-            "angular_momentum": momentum.angular_momentum,
+            "position_com_in_world": motion.position_com_in_world,
+            "velocity_com_in_world": motion.linear_momentum / self.robot.total_mass,
+            "linear_momentum": motion.linear_momentum,
+            "angular_momentum": motion.angular_momentum,
             "linear_momentum_rate_desired": self._last_optimizer["linear_momentum_rate_desired"],
-            "linear_momentum_rate_achieved": momentum.R @ acceleration + momentum.r_bias,
+            "linear_momentum_rate_achieved": motion.linear_momentum_rate,
             "angular_momentum_rate_desired": self._last_optimizer["angular_momentum_rate_desired"],
-            "angular_momentum_rate_achieved": momentum.S @ acceleration + momentum.s_bias,
+            "angular_momentum_rate_achieved": motion.angular_momentum_rate,
             "center_of_pressure": cop,
             "centroidal_moment_pivot": cmp_,
             "supports": list(flags),
@@ -510,6 +561,13 @@ class MomentumController(Controller):
             "root_wrench_residual": dynamics.root_wrench_residual,
             "saturated_joints": dynamics.saturated_joints,
         }
+
+
+def _support_polygon(
+    position_points_in_world: tuple[np.ndarray, ...], flags: tuple[bool, ...]
+) -> np.ndarray:
+    supporting = [pts for pts, on in zip(position_points_in_world, flags, strict=True) if on]
+    return support_polygon(np.vstack(supporting)) if supporting else np.zeros((0, 2))
 
 
 class TrackingController(MomentumController):

@@ -534,7 +534,13 @@ class PrioritizedController(Controller):
         generalized = layout.S_T @ torque + layout.contact_force_map @ x[layout.nu + layout.nv :]
         acceleration = np.linalg.solve(terms.mass_matrix, generalized - terms.bias_forces)
         momentum = terms.momentum
-        cop, cmp_ = ground_reference_points(terms, wrenches, flags, p["ground_height"])
+        cop, cmp_ = ground_reference_points(
+            terms.position_contact_frames_in_world,
+            terms.position_com_in_world,
+            wrenches,
+            flags,
+            p["ground_height"],
+        )
         support = compute_support_equalities(terms, flags)
         constraint_residual = float(np.linalg.norm(support.C @ acceleration - support.d))
         diagnostics = {

@@ -119,7 +119,7 @@ class RobotModel:
         """Length of ``joint_velocity`` and ``joint_torque`` on the wire."""
         return self.model.nv - 6
 
-    @property
+    @cached_property
     def total_mass(self) -> float:
         """Total mass (kg)."""
         return float(sum(inertia.mass for inertia in self.model.inertias))

@@ -222,3 +222,60 @@ def test_tracking_controller_survives_changing_contact_flags(name: str) -> None:
         assert np.all(np.abs(output.joint_torque) <= robot.torque_limit)
         v = v + time_step_s * output.acceleration
         q = pin.integrate(robot.model, q, time_step_s * v)
+
+
+@pytest.mark.parametrize("model_name", MODEL_NAMES)
+@pytest.mark.parametrize("flags", FLAG_SETS[:3])
+def test_exact_inverse_dynamics_by_rnea_matches_the_full_solve(model_name, flags):
+    """The 1 kHz RNEA path equals `solve_inverse_dynamics` whenever it answers, and answers
+    in the common case: near standing, with the base tilted and moving, random q̈."""
+    from controller_server.dynamics import compute_contact_geometry
+    from controller_server.inverse_dynamics import exact_inverse_dynamics
+
+    robot = load_robot_model(model_name)
+    model, data = robot.model, robot.model.createData()
+    mus = [0.8] * len(robot.contacts)
+    limit = np.full(model.nv - 6, 1e4)
+    rng = np.random.default_rng(7)
+    answered = 0
+    for _ in range(20):
+        q, v = standing_state(robot)
+        q[3:7] = pin.Quaternion(pin.exp3(rng.normal(scale=0.02, size=3))).coeffs()
+        v = rng.normal(scale=0.05, size=model.nv)
+        acceleration = rng.normal(scale=0.05, size=model.nv)
+        geometry = compute_contact_geometry(robot, data, q)
+        exact = exact_inverse_dynamics(robot, data, q, v, acceleration, geometry, flags, mus, limit)
+        full = solve_inverse_dynamics(
+            compute_dynamics_terms(robot, model.createData(), q, v), acceleration, flags, mus, limit
+        )
+        if exact is None:
+            assert (
+                full.saturated_joints
+                or full.root_wrench_residual
+                or not np.allclose(full.acceleration, acceleration)
+            )
+            continue
+        answered += 1
+        np.testing.assert_allclose(exact.acceleration, acceleration)
+        np.testing.assert_allclose(exact.joint_torque, full.joint_torque, atol=1e-7)
+        np.testing.assert_allclose(
+            exact.contact_force_in_world, full.contact_force_in_world, atol=1e-7
+        )
+        np.testing.assert_allclose(
+            exact.contact_wrench_in_world, full.contact_wrench_in_world, atol=1e-7
+        )
+        # And physics: M q̈ + h = Sᵀ τ + Σ J_pᵀ f with Pinocchio's own point Jacobians.
+        residual = pin.rnea(model, model.createData(), q, v, acceleration)
+        residual[6:] -= exact.joint_torque
+        for J, f in zip(
+            pinocchio_point_jacobians(robot, q),
+            np.split(
+                exact.contact_force_in_world,
+                np.cumsum([len(c.points_in_frame) for c in robot.contacts])[:-1],
+            ),
+            strict=True,
+        ):
+            residual -= J.T @ f.reshape(-1)
+        assert np.abs(residual).max() < 1e-7 * max(1.0, np.abs(exact.joint_torque).max())
+    if all(flags):  # standing on both feet, the exact case is the common one
+        assert answered >= 5
