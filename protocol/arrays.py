@@ -28,14 +28,17 @@ def _parse(value: Any, *, length: int | None, finite: bool) -> np.ndarray:
     if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1:
         array = value.copy()  # the common case in code: no conversion, no shape checks
     elif isinstance(value, bytes | bytearray | memoryview):
-        raw = bytes(value)
+        raw = value if type(value) is bytes else bytes(value)
         if len(raw) % WIRE_DTYPE.itemsize:
             raise PydanticCustomError(
                 "bad_shape",
                 "float64 array needs a multiple of 8 bytes, got {n} bytes",
                 {"n": len(raw)},
             )
-        array = np.frombuffer(raw, dtype=WIRE_DTYPE).astype(np.float64)
+        # A read-only view of the immutable bytes: no copy on little-endian machines.
+        array = np.frombuffer(raw, dtype=WIRE_DTYPE)
+        if not WIRE_DTYPE.isnative:
+            array = array.astype(np.float64)
     elif isinstance(value, np.ndarray | list | tuple):
         try:
             array = np.array(value, dtype=np.float64).reshape(-1)
@@ -63,7 +66,8 @@ def _parse(value: Any, *, length: int | None, finite: bool) -> np.ndarray:
             "values must be finite, got NaN/inf at index {index}",
             {"index": int(np.flatnonzero(~np.isfinite(array))[0])},
         )
-    array.setflags(write=False)
+    if array.flags.writeable:
+        array.setflags(write=False)
     return array
 
 
