@@ -65,10 +65,10 @@ def control_input_from_state(robot: RobotModel, state: State) -> ControlInput:
     _check_quaternion("orientation_base_in_world_xyzw", state.orientation_base_in_world_xyzw, seq)
     starts = robot.ball_quaternion_starts
     if starts.size:
-        quaternions = state.joint_position[starts[:, None] + np.arange(4)]
-        norms = np.linalg.norm(quaternions, axis=1)
-        if norms.min() < MIN_QUATERNION_NORM:
-            _check_quaternion("joint_position", quaternions[np.argmin(norms)], seq)
+        quaternions = state.joint_position[robot.ball_quaternion_index].reshape(-1, 4)
+        squared_norms = np.einsum("ij,ij->i", quaternions, quaternions)
+        if squared_norms.min() < MIN_QUATERNION_NORM**2:
+            _check_quaternion("joint_position", quaternions[np.argmin(squared_norms)], seq)
 
     q = np.concatenate(
         [state.position_base_in_world, state.orientation_base_in_world_xyzw, state.joint_position]

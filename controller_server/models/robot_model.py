@@ -142,6 +142,11 @@ class RobotModel:
             dtype=int,
         )
 
+    @cached_property
+    def ball_quaternion_index(self) -> np.ndarray:
+        """``ball_quaternion_starts`` expanded: the 4 indices of every ball quaternion, flat."""
+        return (self.ball_quaternion_starts[:, None] + np.arange(4)).reshape(-1)
+
 
 def _mjcf_torque_limits(root: ET.Element, model: pin.Model) -> np.ndarray:
     """Torque limits per DoF from MJCF ``<motor>``s: |gear| × max|ctrlrange| (or forcerange)."""
