@@ -42,6 +42,7 @@ def main() -> None:
     columns = {
         "lockstep": {},
         "pipelined": {"command_delay_ticks": 1},
+        "lockstep, opt. 200 Hz": {"optimizer_period_ticks": 5},
         "pipelined, opt. 200 Hz": {"command_delay_ticks": 1, "optimizer_period_ticks": 5},
     }
     print(f"{'backend':<11}{'physics alone':>15}" + "".join(f"{c:>24}" for c in columns))

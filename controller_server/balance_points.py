@@ -118,21 +118,25 @@ def support_polygon(points_in_world: np.ndarray) -> np.ndarray:
     no points give an empty array.
     """
     xy = np.asarray(points_in_world, dtype=float).reshape(-1, 3)[:, :2]
-    points = sorted({(float(x), float(y)) for x, y in xy})
+    points = sorted(set(map(tuple, xy.tolist())))
     if len(points) <= 2:
         return np.array(points).reshape(-1, 2)
-
-    def left_turn(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> bool:
-        """Strictly left, relative to the edge lengths: collinear up to round-off is not."""
-        ax, ay, bx, by = a[0] - o[0], a[1] - o[1], b[0] - o[0], b[1] - o[1]
-        return ax * by - ay * bx > COLLINEAR_SINE * math.hypot(ax, ay) * math.hypot(bx, by)
+    sine_squared = COLLINEAR_SINE * COLLINEAR_SINE
 
     def chain(ordered: list[tuple[float, float]]) -> list[tuple[float, float]]:
         hull: list[tuple[float, float]] = []
-        for point in ordered:
-            while len(hull) >= 2 and not left_turn(hull[-2], hull[-1], point):
+        for bx, by in ordered:
+            while len(hull) >= 2:
+                (ox, oy), (ax, ay) = hull[-2], hull[-1]
+                ax, ay, ux, uy = ax - ox, ay - oy, bx - ox, by - oy
+                turn = ax * uy - ay * ux
+                # Strictly left, relative to the edge lengths: collinear up to round-off is not.
+                if turn > 0.0 and turn * turn > sine_squared * (ax * ax + ay * ay) * (
+                    ux * ux + uy * uy
+                ):
+                    break
                 hull.pop()
-            hull.append(point)
+            hull.append((bx, by))
         return hull
 
     lower, upper = chain(points), chain(points[::-1])

@@ -53,6 +53,7 @@ from controller_server.dynamics import (
 )
 from controller_server.errors import InvalidParams
 from controller_server.features import (
+    JointLimitSet,
     MotionClip,
     Objective,
     PointTarget,
@@ -64,7 +65,6 @@ from controller_server.features import (
     compute_tracking_objective,
     default_joint_limits,
     desired_linear_momentum_rate,
-    joint_limit_errors,
     load_motion_clip,
     soft_limit_gains,
 )
@@ -214,7 +214,8 @@ class MomentumController(Controller):
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self._data = robot.model.createData()
-        self._limits = default_joint_limits(robot)
+        self._limits = JointLimitSet(default_joint_limits(robot))
+        self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._clip: MotionClip | None = None
         self._points: dict[str, PointTarget] = {}
         self._ticks = 0
@@ -416,7 +417,7 @@ class MomentumController(Controller):
         p, model = self._params, self.robot.model
         q, v = control_input.q, control_input.v
         q_ref, v_ref, a_ref = self._reference(control_input)
-        errors = joint_limit_errors(self._limits, q, model.nv)
+        errors = self._limits.errors(q, model.nv)
         stiffness, damping = soft_limit_gains(
             p["stiffness"],
             p["damping"],
@@ -436,14 +437,14 @@ class MomentumController(Controller):
         ]
 
         momentum, mass = terms.momentum, terms.total_mass
-        support_frames = terms.position_contact_frames_in_world[list(flags)]
+        supporting = [index for index, on in enumerate(flags) if on]
         desired_rate = np.full(3, np.nan)
-        if len(support_frames) and p["weight_linear_momentum"] > 0:
-            support_velocity = np.mean(
-                [J[:3] @ v for J, on in zip(terms.support_jacobians, flags, strict=True) if on],
-                axis=0,
+        if supporting and p["weight_linear_momentum"] > 0:
+            support_jacobian = sum(terms.support_jacobians[index][:3] for index in supporting)
+            support_velocity = support_jacobian @ v / len(supporting)
+            com_desired = (
+                terms.position_contact_frames_in_world[supporting].sum(axis=0) / len(supporting)
             )
-            com_desired = support_frames.mean(axis=0)
             com_desired[:2] += p["com_offset_xy"]
             desired_rate = desired_linear_momentum_rate(
                 momentum,
@@ -460,7 +461,7 @@ class MomentumController(Controller):
                 terms.position_com_in_world,
                 shrink_polygon(polygon, p["cop_margin"]),
                 p["ground_height"],
-                float(np.linalg.norm(model.gravity.linear)),
+                self._gravity,
                 friction_coefficient=min(
                     mu for mu, on in zip(p["friction_coefficients"], flags, strict=True) if on
                 ),
