@@ -4,9 +4,10 @@ For each backend: quiet standing of the thesis humanoid for a few simulated
 seconds with the server's `momentum` controller answering every 1 ms tick:
 in lockstep (the simulator waits for each command), pipelined (the command
 for tick k drives the physics from tick k + 1, and the simulator steps while
-the server computes; `command_delay_ticks = 1`), and pipelined with the
-optimizer every 5th tick (the thesis runs it at 30–200 Hz; inverse dynamics
-still every tick). The baseline, measured in the same run, is the backend
+the server computes; `command_delay_ticks = 1`), and both again at 200 Hz:
+the optimizer and the diagnostics every 5th tick (the thesis runs its
+optimizer at 30–200 Hz, at 200 Hz in its experiments), inverse dynamics and a
+command every tick. The baseline, measured in the same run, is the backend
 stepping alone (zero torques, no server).
 
 Usage: python bench/sim_realtime.py [--seconds 2]
@@ -21,7 +22,7 @@ import numpy as np
 
 from clients.server_process import ServerProcess
 from clients.sim.runner import make_backend, run_scenario, standing_state
-from clients.sim.scenario import load_scenario
+from clients.sim.scenario import Scenario, load_scenario
 
 
 def physics_alone_rtf(scenario, welcome, seconds: float) -> float:
@@ -42,8 +43,12 @@ def main() -> None:
     columns = {
         "lockstep": {},
         "pipelined": {"command_delay_ticks": 1},
-        "lockstep, opt. 200 Hz": {"optimizer_period_ticks": 5},
-        "pipelined, opt. 200 Hz": {"command_delay_ticks": 1, "optimizer_period_ticks": 5},
+        "lockstep, 200 Hz": {"optimizer_period_ticks": 5, "diagnostics_period_ticks": 5},
+        "pipelined, 200 Hz": {
+            "command_delay_ticks": 1,
+            "optimizer_period_ticks": 5,
+            "diagnostics_period_ticks": 5,
+        },
     }
     print(f"{'backend':<11}{'physics alone':>15}" + "".join(f"{c:>24}" for c in columns))
     with ServerProcess() as server:
@@ -51,14 +56,10 @@ def main() -> None:
             scenario = load_scenario("stand", backend=backend, duration_s=args.seconds)
             cells = []
             for overrides in columns.values():
-                params = {k: v for k, v in overrides.items() if k != "command_delay_ticks"}
+                fields = {k: v for k, v in overrides.items() if k in Scenario.model_fields}
+                params = {k: v for k, v in overrides.items() if k not in fields}
                 run = run_scenario(
-                    scenario.model_copy(
-                        update={
-                            "params": {**scenario.params, **params},
-                            "command_delay_ticks": overrides.get("command_delay_ticks", 0),
-                        }
-                    ),
+                    scenario.model_copy(update={"params": {**scenario.params, **params}, **fields}),
                     server.endpoint,
                 )
                 cells.append(f"{run.real_time_factor:.2f}x" + (" fell" if run.fell else ""))

@@ -91,6 +91,7 @@ class ControllerClient:
         contacts: list[ContactSpec] | None = None,
         expected_model_hash: str | None = None,
         client_name: str = "",
+        diagnostics_period_ticks: int = 1,
     ) -> Welcome:
         """Open a session (``hello`` → ``welcome``); see :class:`protocol.Hello`.
 
@@ -107,6 +108,7 @@ class ControllerClient:
             contacts=contacts,
             expected_model_hash=expected_model_hash,
             client_name=client_name,
+            diagnostics_period_ticks=diagnostics_period_ticks,
         )
         return self._handshake()
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import uuid
 from collections import deque
@@ -48,6 +49,7 @@ class Session:
                 hello.seq,
             )
         self.controller = create_controller(hello.controller, self.robot, hello.params)
+        self.diagnostics_period_ticks = hello.diagnostics_period_ticks
         self.session_id = uuid.uuid4().hex
         self.ticks = 0
         self.errors = 0
@@ -72,9 +74,12 @@ class Session:
     def step(self, state: State) -> Command:
         """Answer one state with a command."""
         start = time.perf_counter()
-        control_input = control_input_from_state(self.robot, state)
+        want_diagnostics = self.ticks % self.diagnostics_period_ticks == 0
+        control_input = control_input_from_state(self.robot, state, want_diagnostics)
         output = self.controller.compute(control_input)
         compute_time_s = time.perf_counter() - start
+        if not want_diagnostics:
+            output = dataclasses.replace(output, diagnostics=None)
         command = command_from_output(control_input, output, state.seq, compute_time_s)
         self._compute_times_s.append(compute_time_s)
         self.ticks += 1

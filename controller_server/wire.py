@@ -40,7 +40,9 @@ def _check_quaternion(field: str, quaternion: np.ndarray, seq: int) -> None:
         raise ProtocolError(ErrorCode.INVALID_FIELD, field, f"quaternion has norm {norm:.3g}", seq)
 
 
-def control_input_from_state(robot: RobotModel, state: State) -> ControlInput:
+def control_input_from_state(
+    robot: RobotModel, state: State, want_diagnostics: bool = True
+) -> ControlInput:
     """Validate a state's sizes against the robot and convert it.
 
     Raises:
@@ -82,7 +84,7 @@ def control_input_from_state(robot: RobotModel, state: State) -> ControlInput:
             state.joint_velocity,
         ]
     )
-    return ControlInput(state.time_s, q, v, tuple(state.contact_flags), wrenches)
+    return ControlInput(state.time_s, q, v, tuple(state.contact_flags), wrenches, want_diagnostics)
 
 
 def command_from_output(
@@ -116,6 +118,8 @@ def command_from_output(
         )
     # Fresh arrays of this tick (views of the controller's output), encoded at once.
     values = output.diagnostics
+    if values is None:
+        return Command.model_construct(seq=seq, diagnostics=None, **arrays)
     if values.get("priority_levels") is not None:
         levels = [
             PriorityLevelReport.model_construct(**level) for level in values["priority_levels"]

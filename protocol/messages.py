@@ -126,6 +126,13 @@ class Hello(Message):
         "If set, the server refuses a model whose hash differs.", default=None
     )
     client_name: str = wire_field("Free text for the server's logs.", default="", max_length=200)
+    diagnostics_period_ticks: int = wire_field(
+        "Diagnostics come with the command of every N-th state of the session (the first "
+        "included); the commands between carry none, and the server skips computing them.",
+        default=1,
+        ge=1,
+        le=10_000,
+    )
 
     @model_validator(mode="after")
     def _one_model_source(self) -> Hello:
@@ -365,7 +372,11 @@ class Command(Message):
         unit="N, N·m",
         frame="world",
     )
-    diagnostics: Diagnostics = wire_field("See the Diagnostics table.")
+    diagnostics: Diagnostics | None = wire_field(
+        "See the Diagnostics table; absent between diagnostics ticks "
+        "(`hello.diagnostics_period_ticks`).",
+        default=None,
+    )
 
 
 class SetParams(Message):

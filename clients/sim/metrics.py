@@ -70,11 +70,15 @@ def _foot_slip_and_rotation(record: RunRecord) -> tuple[float, float]:
     frames = [model.getFrameId(contact.frame) for contact in record.welcome.contacts]
     anchors: list[pin.SE3 | None] = [None] * len(frames)
     slip_m = rotation_rad = 0.0
-    supports = (
-        [command.diagnostics.supports for command in record.commands]
-        if record.commands
-        else record.contact_flags
-    )
+    # The controller's supports, carried over the ticks without diagnostics (the
+    # client's flags where the record has no commands).
+    supports = record.contact_flags
+    if record.commands:
+        supports, current = [], record.contact_flags[0]
+        for command in record.commands:
+            if command.diagnostics is not None:
+                current = command.diagnostics.supports
+            supports.append(current)
     for state, flags in zip(record.states, supports, strict=True):
         base = [state.position_base_in_world, state.orientation_base_in_world_xyzw]
         q = np.concatenate([*base, state.joint_position])
@@ -96,13 +100,14 @@ def _foot_slip_and_rotation(record: RunRecord) -> tuple[float, float]:
 
 def compute_metrics(record: RunRecord) -> dict[str, Any]:
     """The run's report: fall, CM excursion, tracking RMS, COP margin, foot slip, torques, speed."""
-    diagnostics = [c.diagnostics for c in record.commands]
+    diagnostics = record.diagnostics()
+    flags_of_diagnosed = [record.contact_flags[tick] for tick in record.diagnosed_ticks()]
     com = np.array([d.position_com_in_world for d in diagnostics])
     torques = np.array([c.joint_torque for c in record.commands])
     limits = np.concatenate([j.torque_limit for j in record.welcome.joints])
     cop_inside = [
         strictly_inside(d.center_of_pressure[:2], d.support_polygon_xy.reshape(-1, 2))
-        for d, flags in zip(diagnostics, record.contact_flags, strict=True)
+        for d, flags in zip(diagnostics, flags_of_diagnosed, strict=True)
         if any(flags)
     ]
     errors = _joint_errors_rad(record)

@@ -19,7 +19,8 @@ def plot_run(record: RunRecord, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     time_s = np.array(record.time_s)
-    diagnostics = [c.diagnostics for c in record.commands]
+    diagnostics = record.diagnostics()
+    diagnosed_time_s = time_s[record.diagnosed_ticks()]
     com = np.array([d.position_com_in_world for d in diagnostics])
     cop = np.array([d.center_of_pressure for d in diagnostics])
     cmp_ = np.array([d.centroidal_moment_pivot for d in diagnostics])
@@ -40,15 +41,15 @@ def plot_run(record: RunRecord, path: Path) -> None:
     top.axis("equal")
     top.legend(loc="best", fontsize=8)
 
-    axes[0, 1].plot(time_s, com[:, 2])
+    axes[0, 1].plot(diagnosed_time_s, com[:, 2])
     axes[0, 1].set(title="CM height", xlabel="time (s)", ylabel="m")
     for push in record.scenario.pushes:
         for ax in axes.flat[1:]:
             ax.axvspan(push.start_s, push.start_s + push.duration_s, color="red", alpha=0.15)
 
     for i, axis in enumerate("xyz"):
-        axes[1, 0].plot(time_s, linear[:, i], label=f"L{axis} (kg·m/s)")
-        axes[1, 0].plot(time_s, angular[:, i], "--", label=f"H{axis} (kg·m²/s)")
+        axes[1, 0].plot(diagnosed_time_s, linear[:, i], label=f"L{axis} (kg·m/s)")
+        axes[1, 0].plot(diagnosed_time_s, angular[:, i], "--", label=f"H{axis} (kg·m²/s)")
     axes[1, 0].set(title="Momenta (red: pushes)", xlabel="time (s)")
     axes[1, 0].legend(fontsize=7, ncol=2)
 

@@ -24,7 +24,7 @@ from clients.layout import joint_slices, neutral_joint_position
 from clients.sim.backend import PhysicsBackend, Push
 from clients.sim.scenario import Scenario
 from clients.state import RobotState
-from protocol.messages import Command, Welcome
+from protocol.messages import Command, Diagnostics, Welcome
 
 __all__ = [
     "FALL_TILT_RAD",
@@ -92,6 +92,16 @@ class RunRecord:
     fall_time_s: float | None = None
     fall_reason: str = ""
     wall_time_s: float = 0.0
+
+    def diagnostics(self) -> list[Diagnostics]:
+        """The diagnostics of :meth:`diagnosed_ticks`, in order."""
+        return [c.diagnostics for c in self.commands if c.diagnostics is not None]
+
+    def diagnosed_ticks(self) -> list[int]:
+        """Indices of the ticks whose command carries diagnostics (``diagnostics_period_ticks``)."""
+        return [
+            tick for tick, command in enumerate(self.commands) if command.diagnostics is not None
+        ]
 
     @property
     def simulated_s(self) -> float:
@@ -169,6 +179,7 @@ def run_scenario(
             # Only the weighted controllers have a measured mode; distributed is their default.
             params={**scenario.params, **({"ground_force_mode": "measured"} if measured else {})},
             client_name=f"poise sim {scenario.name}",
+            diagnostics_period_ticks=scenario.diagnostics_period_ticks,
         )
         backend.reset(standing_state(welcome, scenario.initial_joint_position))
         standing_height_m = welcome.standing_position_base_in_world[2]

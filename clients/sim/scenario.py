@@ -74,6 +74,13 @@ class Scenario(BaseModel):
         "and the simulator steps while the server computes (one control period of latency, as "
         "between sensing and actuation on hardware).",
     )
+    diagnostics_period_ticks: int = Field(
+        default=1,
+        ge=1,
+        le=1000,
+        description="Diagnostics with every N-th command (hello.diagnostics_period_ticks); "
+        "the metrics and plots use the ticks that have them.",
+    )
     ground_force_mode: Literal["distributed", "measured"] = Field(default="distributed")
     support_force_threshold_N: float = Field(
         default=20.0,

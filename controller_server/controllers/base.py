@@ -114,6 +114,8 @@ class ControlInput:
         v: Velocity ``[v_base_in_base, ω_base_in_base, v_joints]``, ``(nv,)``.
         contact_flags: One flag per contact of the robot.
         contact_wrench_in_world: ``(contacts, 6)`` measured ground wrenches, if sent.
+        want_diagnostics: Whether this tick's diagnostics will be sent; a
+            controller may skip computing them when not.
     """
 
     time_s: float
@@ -121,6 +123,7 @@ class ControlInput:
     v: np.ndarray
     contact_flags: tuple[bool, ...]
     contact_wrench_in_world: np.ndarray | None = None
+    want_diagnostics: bool = True
 
 
 @dataclass(frozen=True)
@@ -133,14 +136,14 @@ class ControlOutput:
         contact_force_in_world: ``(p, 3)`` per contact point (N).
         contact_wrench_in_world: ``(contacts, 6)`` per contact (N, N·m).
         diagnostics: Wire diagnostics of this tick except the compute time
-            (see :class:`protocol.Diagnostics`).
+            (see :class:`protocol.Diagnostics`), or ``None`` when not wanted.
     """
 
     acceleration: np.ndarray
     joint_torque: np.ndarray
     contact_force_in_world: np.ndarray
     contact_wrench_in_world: np.ndarray
-    diagnostics: dict[str, Any]
+    diagnostics: dict[str, Any] | None
 
 
 class Controller(ABC):

@@ -356,12 +356,11 @@ class MomentumController(Controller):
                 geometry.position_points_in_world,
                 geometry.position_contact_frames_in_world,
             )
-            polygon = _support_polygon(points, flags)
         if dynamics is None:
             terms = compute_dynamics_terms(robot, self._data, q, v)
             points, origins = terms.position_points_in_world, terms.position_contact_frames_in_world
-            polygon = _support_polygon(points, flags)
             if run_optimizer:
+                polygon = _support_polygon(points, flags)
                 wrenches = (
                     control_input.contact_wrench_in_world if measured else self._last_wrenches
                 )
@@ -379,13 +378,20 @@ class MomentumController(Controller):
                 qp_solver=p["qp_solver"],
             )
         self._last_wrenches = dynamics.contact_wrench_in_world
-        motion = centroidal_motion(robot.model, self._data, q, v, dynamics.acceleration)
+        diagnostics = None
+        if control_input.want_diagnostics:
+            motion = centroidal_motion(robot.model, self._data, q, v, dynamics.acceleration)
+            if not run_optimizer:
+                polygon = _support_polygon(points, flags)
+            diagnostics = self._diagnostics(
+                motion, origins, dynamics, flags, polygon, run_optimizer
+            )
         return ControlOutput(
             acceleration=dynamics.acceleration,
             joint_torque=dynamics.joint_torque,
             contact_force_in_world=dynamics.contact_force_in_world,
             contact_wrench_in_world=dynamics.contact_wrench_in_world,
-            diagnostics=self._diagnostics(motion, origins, dynamics, flags, polygon, run_optimizer),
+            diagnostics=diagnostics,
         )
 
     def _reference(self, control_input: ControlInput) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -442,8 +448,8 @@ class MomentumController(Controller):
         if supporting and p["weight_linear_momentum"] > 0:
             support_jacobian = sum(terms.support_jacobians[index][:3] for index in supporting)
             support_velocity = support_jacobian @ v / len(supporting)
-            com_desired = (
-                terms.position_contact_frames_in_world[supporting].sum(axis=0) / len(supporting)
+            com_desired = terms.position_contact_frames_in_world[supporting].sum(axis=0) / len(
+                supporting
             )
             com_desired[:2] += p["com_offset_xy"]
             desired_rate = desired_linear_momentum_rate(

@@ -166,3 +166,20 @@ def test_command_delay_holds_each_command_from_the_next_tick(server, monkeypatch
     for torque, command_torque in zip(applied, expected, strict=True):
         np.testing.assert_array_equal(torque, command_torque)
     assert not np.array_equal(sent[1], sent[2])  # the commands differ tick to tick
+
+
+def test_sparse_diagnostics_feed_metrics_and_plots(server, tmp_path):
+    """With diagnostics every 5th tick the report and the plot use those ticks only."""
+    from clients.sim.metrics import compute_metrics
+    from clients.sim.plots import plot_run
+    from clients.sim.runner import run_scenario
+
+    scenario = load_scenario("stand", backend="mujoco", duration_s=0.2, diagnostics_period_ticks=5)
+    record = run_scenario(scenario, server.endpoint)
+    assert record.diagnosed_ticks() == list(range(0, 200, 5))
+    assert len(record.diagnostics()) == 40
+    metrics = compute_metrics(record)
+    assert not metrics["fell"] and 0.0 <= metrics["com_excursion_m"] < 0.05
+    assert metrics["cop_strictly_inside_fraction"] > 0.9
+    plot_run(record, tmp_path / "sparse.png")
+    assert (tmp_path / "sparse.png").stat().st_size > 10_000

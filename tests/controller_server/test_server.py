@@ -189,3 +189,22 @@ def test_non_finite_controller_output_never_leaves_the_server(server, monkeypatc
     monkeypatch.setattr(controller, "compute", poisoned)
     state = random_state(welcome, np.random.default_rng(5))
     assert_error(ask(server, ALICE, state), ErrorCode.INTERNAL, field=field, seq=state.seq)
+
+
+@pytest.mark.parametrize("controller", ["momentum", "prioritized"])
+def test_diagnostics_come_every_nth_tick_and_change_no_command(server, controller):
+    """`diagnostics_period_ticks = 3`: ticks 0, 3, 6 carry diagnostics, the rest none, and the
+    commands are those of a session that sends them every tick (same states, same order)."""
+    rng = np.random.default_rng(5)
+    params = {"optimizer_period_ticks": 2} if controller == "momentum" else {}
+    welcome = hello(server, ALICE, controller=controller, params=params, diagnostics_period_ticks=3)
+    hello(server, BOB, controller=controller, params=params)
+    states = [random_state(welcome, rng).model_copy(update={"seq": 2 + t}) for t in range(7)]
+    for tick, state in enumerate(states):
+        sparse, full = ask(server, ALICE, state), ask(server, BOB, state)
+        assert isinstance(sparse, Command) and isinstance(full, Command)
+        assert (sparse.diagnostics is not None) == (tick % 3 == 0), tick
+        assert full.diagnostics is not None
+        np.testing.assert_array_equal(sparse.joint_torque, full.joint_torque)
+        np.testing.assert_array_equal(sparse.joint_acceleration, full.joint_acceleration)
+        np.testing.assert_array_equal(sparse.contact_wrench_in_world, full.contact_wrench_in_world)
