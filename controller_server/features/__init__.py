@@ -6,7 +6,6 @@ from controller_server.features.angular_momentum import (
 )
 from controller_server.features.joint_limits import (
     BallJointLimit,
-    JointLimitSet,
     RevoluteJointLimit,
     default_joint_limits,
     joint_limit_errors,
@@ -25,7 +24,6 @@ from controller_server.features.tracking import compute_tracking_objective
 __all__ = [
     "BallJointLimit",
     "ClipSample",
-    "JointLimitSet",
     "MotionClip",
     "Objective",
     "PointTarget",

@@ -21,14 +21,7 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 
 from controller_server.errors import ModelError
-from controller_server.features.swing_twist import (
-    _TINY,
-    SwingCone,
-    rotate,
-    swing_twist,
-    twist_angle,
-)
-from controller_server.spatial import cross
+from controller_server.features.swing_twist import SwingCone, rotate, swing_twist, twist_angle
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -38,7 +31,6 @@ if TYPE_CHECKING:
 __all__ = [
     "BallJointLimit",
     "JointLimit",
-    "JointLimitSet",
     "RevoluteJointLimit",
     "default_joint_limits",
     "joint_limit_errors",
@@ -243,63 +235,6 @@ def joint_limit_errors(limits: Iterable[JointLimit], q: np.ndarray, nv: int) -> 
     for limit in limits:
         errors[limit.idx_v : limit.idx_v + limit.nv] = limit.error(q)
     return errors
-
-
-class JointLimitSet:
-    """The limits of one robot, tested together: :func:`joint_limit_errors` in one pass.
-
-    Every joint is first tested for being within its limits with array
-    arithmetic over all joints at once (the common case); only joints that
-    fail get their exact error from :meth:`BallJointLimit.error` or
-    :meth:`RevoluteJointLimit.error`. Same result as :func:`joint_limit_errors`.
-    """
-
-    def __init__(self, limits: Iterable[JointLimit]):
-        self.limits = tuple(limits)
-        balls = [limit for limit in self.limits if isinstance(limit, BallJointLimit)]
-        boxes = [limit for limit in self.limits if isinstance(limit, RevoluteJointLimit)]
-        self._balls, self._boxes = balls, boxes
-        self._ball_q = np.array([[b.idx_q + k for k in range(4)] for b in balls], dtype=int)
-        self._axes = np.array([b.bone_axis_in_parent for b in balls]).reshape(-1, 3)
-        self._twist = np.array([[b.twist_lower_rad, b.twist_upper_rad] for b in balls])
-        faces = max((len(b.cone.face_normals_in_parent) for b in balls), default=0)
-        self._normals = np.zeros((len(balls), faces, 3))
-        self._has_face = np.zeros((len(balls), faces), dtype=bool)
-        for row, ball in enumerate(balls):
-            normals = ball.cone.face_normals_in_parent
-            self._normals[row, : len(normals)] = normals
-            self._has_face[row, : len(normals)] = True
-        self._reflex = np.array([b.cone.reflex for b in balls], dtype=bool)
-        self._box_q = np.array([b.idx_q for b in boxes], dtype=int)
-        self._box_bounds = np.array([[b.lower, b.upper] for b in boxes]).reshape(-1, 2)
-
-    def errors(self, q: np.ndarray, nv: int) -> np.ndarray:
-        """:func:`joint_limit_errors` of these limits at ``q``."""
-        errors = np.zeros(nv)
-        outside: list[JointLimit] = []
-        if self._balls:
-            quaternions = q[self._ball_q]
-            quaternions = quaternions / np.linalg.norm(quaternions, axis=1, keepdims=True)
-            u, w = quaternions[:, :3], quaternions[:, 3:]
-            t = 2.0 * cross(u, self._axes)  # a' = a + w t + u × t
-            bones = self._axes + w * t + cross(u, t)
-            twist = 2.0 * np.arctan2(np.einsum("ij,ij->i", u, self._axes), w[:, 0])
-            twist = np.where(twist > math.pi, twist - 2 * math.pi, twist)
-            twist = np.where(twist <= -math.pi, twist + 2 * math.pi, twist)
-            projections = np.einsum("bfi,bi->bf", self._normals, bones)
-            convex_ok = np.where(self._has_face, projections, -np.inf).max(axis=1, initial=-np.inf)
-            reflex_ok = np.where(self._has_face, projections, np.inf).min(axis=1, initial=np.inf)
-            in_cone = np.where(self._reflex, reflex_ok <= _TINY, convex_ok <= _TINY)
-            in_cone |= ~self._has_face.any(axis=1)
-            within = in_cone & (self._twist[:, 0] <= twist) & (twist <= self._twist[:, 1])
-            outside += [ball for ball, ok in zip(self._balls, within, strict=True) if not ok]
-        if self._boxes:
-            values = q[self._box_q]
-            inside = (self._box_bounds[:, 0] <= values) & (values <= self._box_bounds[:, 1])
-            outside += [box for box, ok in zip(self._boxes, inside, strict=True) if not ok]
-        for limit in outside:
-            errors[limit.idx_v : limit.idx_v + limit.nv] = limit.error(q)
-        return errors
 
 
 def soft_limit_gains(

@@ -359,23 +359,3 @@ def test_revolute_knee_beyond_its_limit():
     errors = joint_limit_errors(limits, q, robot.model.nv)
     assert errors[knee.idx_v] == pytest.approx(0.25)
     assert np.count_nonzero(errors) == 1
-
-
-@pytest.mark.parametrize("model_name", ["thesis_humanoid", "revolute_humanoid", "dino_biped"])
-def test_joint_limit_set_matches_the_per_joint_errors(model_name):
-    """The batched within-test changes nothing: same errors as joint by joint, inside and out."""
-    from controller_server.features.joint_limits import JointLimitSet
-
-    robot = load_robot_model(model_name)
-    limits = default_joint_limits(robot)
-    batch = JointLimitSet(limits)
-    model = robot.model
-    rng = np.random.default_rng(3)
-    violated = 0
-    for scale in (0.1, 0.5, 1.5, 3.0):
-        for _ in range(25):
-            q = pin.integrate(model, pin.neutral(model), rng.normal(scale=scale, size=model.nv))
-            expected = joint_limit_errors(limits, q, model.nv)
-            np.testing.assert_allclose(batch.errors(q, model.nv), expected, rtol=0, atol=1e-12)
-            violated += bool(expected.any())
-    assert violated > 20  # both branches exercised
