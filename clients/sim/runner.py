@@ -189,11 +189,11 @@ def run_scenario(
         changes = list(scenario.param_changes)
         flags = backend.contact_flags()  # at rest on the ground: every touching foot supports
         held_torque = None  # with a command delay: the torques of the previous tick's command
+        state = backend.state()
         start = time.perf_counter()
         for tick in range(ticks):
             while changes and changes[0].time_s <= backend.time_s + 1e-9:
                 client.set_params(changes.pop(0).params)
-            state = backend.state()
             touching = backend.contact_flags()
             # The wrenches cost MuJoCo a contact-force call per contact: read them only
             # when they are sent or decide whether a touching foot becomes a support.
@@ -205,6 +205,7 @@ def run_scenario(
                 flags, touching, normal_force_N, scenario.support_force_threshold_N
             )
             wrenches = wrenches if measured else None
+            sent_state = state
             try:
                 client.send_state(state.to_message(backend.time_s, flags, wrenches))
                 if held_torque is None or not scenario.command_delay_ticks:
@@ -220,10 +221,11 @@ def run_scenario(
                 record.fall_reason = f"controller error {exc.code.name}: {exc.detail}"
                 break
             record.time_s.append(tick / scenario.control_rate_hz)
-            record.states.append(state)
+            record.states.append(sent_state)
             record.commands.append(command)
             record.contact_flags.append(flags)
-            reason = _fall_reason(backend.state(), standing_height_m, non_foot_contact)
+            state = backend.state()  # after the step: checked now, sent next tick
+            reason = _fall_reason(state, standing_height_m, non_foot_contact)
             if reason:
                 record.fell, record.fall_time_s, record.fall_reason = True, backend.time_s, reason
                 break
