@@ -5,7 +5,9 @@ server (``state``), and applies the returned torques for the physics steps
 until the next tick (zero-order hold). With ``command_delay_ticks = 1`` the
 torques of tick k's command are held from tick k + 1 on, and the physics
 steps while the server computes (client and server run in parallel, one
-control period apart, as on hardware). The scenario's parameter changes go
+control period apart, as on hardware); the state sent at tick k is then the
+one predicted for tick k + 1 (:meth:`RobotState.predicted`), so each command
+is computed for the state it will act on. The scenario's parameter changes go
 out as ``set_params`` at their tick. In ``measured`` ground-force mode it
 also sends the backend's contact wrenches (the thesis' penalty forces). The
 run stops early once the robot has fallen.
@@ -20,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from clients.client import ControllerClient, ServerError
-from clients.layout import joint_slices, neutral_joint_position
+from clients.layout import JointIndices, joint_slices, neutral_joint_position
 from clients.sim.backend import PhysicsBackend, Push
 from clients.sim.scenario import Scenario
 from clients.state import RobotState
@@ -188,7 +190,8 @@ def run_scenario(
         steps = scenario.physics_steps_per_control_tick
         changes = list(scenario.param_changes)
         flags = backend.contact_flags()  # at rest on the ground: every touching foot supports
-        held_torque = None  # with a command delay: the torques of the previous tick's command
+        held_command = None  # with a command delay: the previous tick's command
+        joints = JointIndices.of(welcome.joints)
         state = backend.state()
         start = time.perf_counter()
         for tick in range(ticks):
@@ -205,23 +208,30 @@ def run_scenario(
                 flags, touching, normal_force_N, scenario.support_force_threshold_N
             )
             wrenches = wrenches if measured else None
-            sent_state = state
+            sent, sent_time_s = state, backend.time_s
+            if held_command is not None and scenario.command_delay_ticks:
+                # This tick's command acts from the next tick on: send the state it will
+                # meet there, predicted with the accelerations of the command acting now.
+                period_s = 1.0 / scenario.control_rate_hz
+                sent = state.predicted(period_s, joints, held_command)
+                sent_time_s += period_s
             try:
-                client.send_state(state.to_message(backend.time_s, flags, wrenches))
-                if held_torque is None or not scenario.command_delay_ticks:
+                client.send_state(sent.to_message(sent_time_s, flags, wrenches))
+                if held_command is None or not scenario.command_delay_ticks:
                     command = client.receive_command()
-                    held_torque = command.joint_torque
-                    non_foot_contact = _step_physics(backend, held_torque, pushes, steps)
+                    non_foot_contact = _step_physics(backend, command.joint_torque, pushes, steps)
                 else:  # the physics runs while the server computes this state's command
-                    non_foot_contact = _step_physics(backend, held_torque, pushes, steps)
+                    non_foot_contact = _step_physics(
+                        backend, held_command.joint_torque, pushes, steps
+                    )
                     command = client.receive_command()
-                    held_torque = command.joint_torque
+                held_command = command
             except ServerError as exc:  # no command for this state: the run ends here
                 record.fell, record.fall_time_s = True, backend.time_s
                 record.fall_reason = f"controller error {exc.code.name}: {exc.detail}"
                 break
             record.time_s.append(tick / scenario.control_rate_hz)
-            record.states.append(sent_state)
+            record.states.append(state)
             record.commands.append(command)
             record.contact_flags.append(flags)
             state = backend.state()  # after the step: checked now, sent next tick

@@ -72,7 +72,8 @@ class Scenario(BaseModel):
         description="0: lockstep, each state's command drives the physics from that tick. "
         "1: pipelined, the command for the state of tick k drives the physics from tick k + 1, "
         "and the simulator steps while the server computes (one control period of latency, as "
-        "between sensing and actuation on hardware).",
+        "between sensing and actuation on hardware); the state sent is then the one predicted "
+        "for tick k + 1 with the accelerations of the command acting meanwhile.",
     )
     diagnostics_period_ticks: int = Field(
         default=1,
