@@ -20,10 +20,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from clients.client import ControllerClient, ServerError
-from clients.layout import JointIndices, joint_slices, neutral_joint_position
+from clients.layout import joint_slices, neutral_joint_position
 from clients.sim.backend import PhysicsBackend, Push
+from clients.sim.model_file import resolve_model_path
 from clients.sim.scenario import Scenario
 from clients.state import RobotState
 from protocol.messages import Command, Diagnostics, Welcome
@@ -191,7 +193,8 @@ def run_scenario(
         changes = list(scenario.param_changes)
         flags = backend.contact_flags()  # at rest on the ground: every touching foot supports
         held_command = None  # with a command delay: the previous tick's command
-        joints = JointIndices.of(welcome.joints)
+        # Pinocchio model of the same file, for predicting the state (pipelined runs).
+        model = pin.buildModelFromMJCF(str(resolve_model_path(scenario.model)))
         state = backend.state()
         start = time.perf_counter()
         for tick in range(ticks):
@@ -213,7 +216,7 @@ def run_scenario(
                 # This tick's command acts from the next tick on: send the state it will
                 # meet there, predicted with the accelerations of the command acting now.
                 period_s = 1.0 / scenario.control_rate_hz
-                sent = state.predicted(period_s, joints, held_command)
+                sent = state.predicted(period_s, model, held_command)
                 sent_time_s += period_s
             try:
                 client.send_state(sent.to_message(sent_time_s, flags, wrenches))
