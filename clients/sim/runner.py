@@ -193,8 +193,12 @@ def run_scenario(
         changes = list(scenario.param_changes)
         flags = backend.contact_flags()  # at rest on the ground: every touching foot supports
         held_command = None  # with a command delay: the previous tick's command
-        # Pinocchio model of the same file, for predicting the state (pipelined runs).
-        model = pin.buildModelFromMJCF(str(resolve_model_path(scenario.model)))
+        # Pipelined runs predict the state with a Pinocchio model of the same file.
+        model = (
+            pin.buildModelFromMJCF(str(resolve_model_path(scenario.model)))
+            if scenario.command_delay_ticks
+            else None
+        )
         state = backend.state()
         start = time.perf_counter()
         for tick in range(ticks):
@@ -212,7 +216,7 @@ def run_scenario(
             )
             wrenches = wrenches if measured else None
             sent, sent_time_s = state, backend.time_s
-            if held_command is not None and scenario.command_delay_ticks:
+            if held_command is not None and model is not None:
                 # This tick's command acts from the next tick on: send the state it will
                 # meet there, predicted with the accelerations of the command acting now.
                 period_s = 1.0 / scenario.control_rate_hz
