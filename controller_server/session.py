@@ -78,8 +78,8 @@ class Session:
         control_input = control_input_from_state(self.robot, state, want_diagnostics)
         output = self.controller.compute(control_input)
         compute_time_s = time.perf_counter() - start
-        if not want_diagnostics:
-            output = dataclasses.replace(output, diagnostics=None)
+        if not want_diagnostics and output.diagnostics is not None:
+            output = dataclasses.replace(output, diagnostics=None)  # computed anyway: not sent
         command = command_from_output(control_input, output, state.seq, compute_time_s)
         self._compute_times_s.append(compute_time_s)
         self.ticks += 1
