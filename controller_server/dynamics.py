@@ -31,6 +31,7 @@ import pinocchio as pin
 
 from controller_server.models import RobotModel
 from controller_server.momentum import MomentumRates, compute_momentum_rates
+from controller_server.spatial import wrench_map
 
 __all__ = [
     "CentroidalMotion",
@@ -140,22 +141,17 @@ def _points_on_frame(
     """
     offsets = points_in_frame @ placement.rotation.T  # (k, 3), world axes
     count = len(offsets)
-    x, y, z = offsets.T
-    wrench_map = np.zeros((6, 3 * count))
-    wrench_map[0, 0::3] = wrench_map[1, 1::3] = wrench_map[2, 2::3] = 1.0
-    wrench_map[3, 1::3], wrench_map[3, 2::3] = -z, y
-    wrench_map[4, 0::3], wrench_map[4, 2::3] = z, -x
-    wrench_map[5, 0::3], wrench_map[5, 1::3] = -y, x
+    point_wrench_map = wrench_map(offsets)
     omega = velocity.angular
     # ω × (ω × r) = (ω ωᵀ − |ω|² I) r
     centripetal = offsets @ (np.outer(omega, omega) - (omega @ omega) * np.eye(3))
-    transposed = wrench_map.T
+    transposed = point_wrench_map.T
     return PointKinematics(
         position_in_world=placement.translation + offsets,
         velocity_in_world=(transposed @ velocity.vector).reshape(count, 3),
         jacobian=transposed @ jacobian,
         drift=transposed @ drift.vector + centripetal.reshape(-1),
-        wrench_map=wrench_map,
+        wrench_map=point_wrench_map,
     )
 
 

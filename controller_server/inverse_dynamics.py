@@ -43,6 +43,7 @@ import scipy.linalg.lapack
 
 from controller_server.dynamics import ContactGeometry, DynamicsTerms
 from controller_server.models import RobotModel
+from controller_server.spatial import wrench_map
 
 __all__ = [
     "InverseDynamicsResult",
@@ -408,13 +409,8 @@ def exact_inverse_dynamics(
     wrench_in_world = (root_in_base.reshape(2, 3) @ root.rotation.T).reshape(-1)
     points = geometry.position_points_in_world
     chosen = [index for index, on in enumerate(supports) if on]
-    offsets = np.concatenate([points[index] for index in chosen]) - origin
-    x, y, z = offsets.T
-    balance = np.zeros((NUM_ROOT_DOFS, 3 * len(offsets)))  # [f; r × f] per point
-    balance[0, 0::3] = balance[1, 1::3] = balance[2, 2::3] = 1.0
-    balance[3, 1::3], balance[3, 2::3] = -z, y
-    balance[4, 0::3], balance[4, 2::3] = z, -x
-    balance[5, 0::3], balance[5, 1::3] = -y, x
+    # [Σ f; Σ r × f] about the base origin, in world axes.
+    balance = wrench_map(np.concatenate([points[index] for index in chosen]) - origin)
     mus = [friction_coefficients[index] for index in chosen for _ in points[index]]
     solution = minimum_norm_balance(balance, wrench_in_world, mus)
     if solution is None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["cross", "skew", "stacked_skew"]
+__all__ = ["cross", "skew", "stacked_skew", "wrench_map"]
 
 
 def skew(u: np.ndarray) -> np.ndarray:
@@ -32,3 +32,19 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def wrench_map(offsets: np.ndarray) -> np.ndarray:
+    """``(6, 3k)`` ``W = [I … I; [r₁]× … [r_k]×]`` for ``k`` points at offsets ``r`` from an origin.
+
+    Forces ``f`` at the points (stacked) make the wrench ``W f = [Σ f; Σ r × f]``
+    about the origin; by duality the points' velocity Jacobian is ``Wᵀ`` times
+    the origin's ``[v; ω]`` Jacobian.
+    """
+    x, y, z = np.asarray(offsets, dtype=float).reshape(-1, 3).T
+    matrix = np.zeros((6, 3 * len(x)))
+    matrix[0, 0::3] = matrix[1, 1::3] = matrix[2, 2::3] = 1.0
+    matrix[3, 1::3], matrix[3, 2::3] = -z, y
+    matrix[4, 0::3], matrix[4, 2::3] = z, -x
+    matrix[5, 0::3], matrix[5, 1::3] = -y, x
+    return matrix
