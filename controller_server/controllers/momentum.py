@@ -337,7 +337,7 @@ class MomentumController(Controller):
         )
         self._ticks += 1
         friction = list(p["friction_coefficients"])
-        dynamics = None
+        dynamics, polygon = None, None
         if not run_optimizer and not measured:
             assert self._last_solution is not None
             geometry = compute_contact_geometry(robot, self._data, q)
@@ -381,7 +381,7 @@ class MomentumController(Controller):
         diagnostics = None
         if control_input.want_diagnostics:
             motion = centroidal_motion(robot.model, self._data, q, v, dynamics.acceleration)
-            if not run_optimizer:
+            if polygon is None:  # not built for the optimizer this tick
                 polygon = _support_polygon(points, flags)
             diagnostics = self._diagnostics(
                 motion, origins, dynamics, flags, polygon, run_optimizer
