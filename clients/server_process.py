@@ -13,6 +13,7 @@ from types import TracebackType
 __all__ = ["ServerProcess"]
 
 READY_PREFIX = "poise serve: listening on "
+"""Printed by ``poise serve`` once it answers at once (``controller_server.cli``)."""
 
 
 class ServerProcess:

@@ -1,171 +1,585 @@
-"""The ZeroMQ ROUTER server: one session per client identity.
+"""The ZeroMQ server: a broker in front of session worker processes.
 
-Every request frame is decoded at the edge (:func:`protocol.decode`); every
-problem becomes a typed ``error`` reply naming the field, and no request can
-stop the loop or disturb another session. ``hello`` creates (or replaces)
-the sender's session, ``state`` → ``command``, ``set_params`` → ``params``,
-``stats`` → ``stats``, ``bye`` closes the session. Sessions idle longer than
-``session_timeout_s`` expire.
+The zguide's load-balancing broker, adapted to sessions that keep state: a
+ROUTER faces the clients, a second ROUTER (``ipc://`` in a private directory)
+faces the worker processes (:mod:`controller_server.worker`). A ``hello`` opens
+the client's session on the worker with the fewest; every later request of
+that session goes to the same worker. So serving uses every core, and a slow
+session delays only the sessions of its own worker.
+
+The broker never computes a tick. It enforces what a server in front of a
+robot needs:
+
+- **deadlines**: a request not answered within ``deadline_s`` of receipt is
+  answered ``DEADLINE_EXCEEDED`` (the late reply is dropped); a worker still
+  stuck ``recycle_after_s`` later is killed and replaced;
+- **caps** (``LIMIT_EXCEEDED``): sessions per server and per client, requests
+  in flight per session, message size;
+- **identity**: a session belongs to the client's routing id *and* its CURVE
+  key (or, without CURVE, its peer address), so another peer reusing a
+  routing id does not inherit it; ``stats`` shows a client its own sessions;
+- **expiry**: idle sessions are dropped and their memory returned.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import logging
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
 import threading
 import time
-from collections.abc import Sequence
+from typing import Any
 
+import msgpack
 import zmq
 
-from controller_server.session import Session
-from protocol.codec import MAX_MESSAGE_BYTES, decode, encode
+from controller_server.config import SINGLE_THREADED_BLAS, ServeConfig
+from controller_server.session_table import SessionTable
+from controller_server.worker import DEADLINE
+from protocol.codec import decode, encode
 from protocol.errors import ErrorCode, ProtocolError
-from protocol.messages import Bye, Error, Hello, Message, SetParams, State, Stats
+from protocol.messages import Error, Message, SessionStats, Stats
 
-__all__ = ["ControllerServer"]
+__all__ = ["ControllerServer", "ServerStartError"]
 
 log = logging.getLogger("poise.server")
 
-POLL_INTERVAL_MS = 100
+POLL_INTERVAL_S = 0.05
 EXPIRY_CHECK_INTERVAL_S = 1.0
+DRAIN_S = 1.0
+"""After SIGTERM, requests already received are still answered for this long."""
+WORKER_START_TIMEOUT_S = 120.0
+
+
+class ServerStartError(RuntimeError):
+    """The server could not start (bad key file, endpoint in use, worker failed)."""
+
+
+@dataclasses.dataclass
+class _Route:
+    """Where a client's session lives, and who may use it."""
+
+    key: bytes
+    """Session key on the worker (opaque, never reused)."""
+    worker: bytes
+    client: str
+    """CURVE key (z85) of the client, or its peer address without CURVE."""
+    last_seen_s: float
+    in_flight: int = 0
+
+
+@dataclasses.dataclass
+class _Pending:
+    """A request forwarded to a worker and not yet answered by it."""
+
+    identity: bytes
+    seq: int
+    route: _Route
+    deadline_s: float
+    recycle_s: float
+    answered: bool = False
+
+
+@dataclasses.dataclass
+class _Worker:
+    identity: bytes
+    process: subprocess.Popen[bytes]
+    ready: bool = False
+    routes: set[bytes] = dataclasses.field(default_factory=set)
+    """Routing ids of the clients whose sessions live here."""
+    pending: dict[bytes, _Pending] = dataclasses.field(default_factory=dict)
+    """Forwarded requests by id, in the order sent (and served)."""
+
+
+@dataclasses.dataclass
+class _Gather:
+    """A ``stats`` request waiting for the workers' answers."""
+
+    identity: bytes
+    seq: int
+    deadline_s: float
+    waiting: set[bytes]
+    sessions: list[SessionStats] = dataclasses.field(default_factory=list)
+
+
+def _error(seq: int, code: ErrorCode, field: str, detail: str) -> Error:
+    return Error(seq=max(seq, -1), code=code, field=field, detail=detail)
+
+
+def _peek(payload: bytes) -> tuple[str | None, int]:
+    """``type`` and ``seq`` of a request without validating it (msgpack only)."""
+    try:
+        head = msgpack.unpackb(payload, raw=False, strict_map_key=True)
+    except Exception:  # garbage: the full decode says what is wrong
+        return None, -1
+    if not isinstance(head, dict):
+        return None, -1
+    kind, seq = head.get("type"), head.get("seq")
+    return (
+        kind if isinstance(kind, str) else None,
+        seq if type(seq) is int and 0 <= seq < 2**63 else -1,
+    )
 
 
 class ControllerServer:
-    """Serve controllers to many clients over ZeroMQ.
+    """Serve controllers to many clients over ZeroMQ, sessions in worker processes.
 
     Args:
-        endpoints: ZeroMQ endpoints to bind, e.g. ``tcp://127.0.0.1:5555`` or
-            ``ipc:///tmp/poise.sock``.
-        session_timeout_s: Idle time after which a session is dropped.
+        config: Endpoints, workers, deadlines, caps, model directories, keys.
+
+    Raises:
+        ServerStartError: A key file is unreadable or an endpoint cannot be bound.
     """
 
-    def __init__(self, endpoints: Sequence[str], session_timeout_s: float = 30.0):
-        self.endpoints = list(endpoints)
-        self.session_timeout_s = session_timeout_s
-        self.sessions: dict[bytes, Session] = {}
+    def __init__(self, config: ServeConfig):
+        self.config = config
         self.stop_event = threading.Event()
+        self.routes: dict[bytes, _Route] = {}
+        self.workers: dict[bytes, _Worker] = {}
+        self._gathers: dict[bytes, _Gather] = {}
+        self._ids = itertools.count(1)
+        self._generation = itertools.count()
+        self._local = SessionTable()  # answers requests that have no session
         self._context = zmq.Context()
-        self._socket = self._context.socket(zmq.ROUTER)
-        self._socket.setsockopt(zmq.LINGER, 0)
-        self._socket.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES + 1024)
+        self._authenticator: Any = None
+        self._frontend = self._context.socket(zmq.ROUTER)
+        self._frontend.setsockopt(zmq.LINGER, 0)
+        self._frontend.setsockopt(zmq.MAXMSGSIZE, 2 * config.max_message_bytes)
+        self._curve = config.curve_secret_key is not None
+        if self._curve:
+            self._enable_curve()
         self.bound_endpoints: list[str] = []
-        for endpoint in self.endpoints:
-            self._socket.bind(endpoint)
-            self.bound_endpoints.append(self._socket.getsockopt_string(zmq.LAST_ENDPOINT))
+        self._runtime_dir = tempfile.mkdtemp(prefix="poise-broker-")
+        self._backend = self._context.socket(zmq.ROUTER)
+        self._backend.setsockopt(zmq.LINGER, 0)
+        self._backend.setsockopt(zmq.ROUTER_MANDATORY, 1)
+        self._backend_endpoint = f"ipc://{self._runtime_dir}/workers"
+        try:
+            self._backend.bind(self._backend_endpoint)
+            for endpoint in config.endpoints:
+                self._frontend.bind(endpoint)
+                self.bound_endpoints.append(self._frontend.getsockopt_string(zmq.LAST_ENDPOINT))
+        except zmq.ZMQError as exc:
+            self.close()
+            raise ServerStartError(f"cannot bind {endpoint!r}: {exc}") from None
 
-    def handle(self, identity: bytes, payload: bytes) -> Message:
-        """Answer one request from ``identity``; never raises for bad input."""
-        seq = -1
+    # ----------------------------------------------------------------- set-up
+
+    def _enable_curve(self) -> None:
+        from zmq.auth.thread import ThreadAuthenticator
+
+        path = self.config.curve_secret_key
+        try:
+            public, secret = zmq.auth.load_certificate(path)
+        except (OSError, ValueError) as exc:
+            raise ServerStartError(f"cannot read the server key {path!r}: {exc}") from None
+        if not secret:
+            raise ServerStartError(
+                f"{path!r} holds no secret key: pass the `.key_secret` file of `poise keygen`"
+            )
+        allowed = self.config.allow_client_keys
+        if allowed is not None and not os.path.isdir(allowed):
+            raise ServerStartError(f"--allow-client-keys {allowed!r} is not a directory")
+        self._authenticator = ThreadAuthenticator(self._context, log=log.getChild("auth"))
+        self._authenticator.start()
+        self._authenticator.configure_curve(
+            domain="*", location=allowed if allowed is not None else zmq.auth.CURVE_ALLOW_ANY
+        )
+        self._frontend.curve_secretkey = secret
+        self._frontend.curve_publickey = public
+        self._frontend.curve_server = True
+
+    def start_workers(self) -> None:
+        """Start every worker and wait until each is ready (warm: first replies are fast).
+
+        Raises:
+            ServerStartError: A worker exited or did not report ready in time.
+        """
+        for _ in range(self.config.workers):
+            self._spawn_worker()
+        deadline = time.monotonic() + WORKER_START_TIMEOUT_S
+        while not all(worker.ready for worker in self.workers.values()):
+            for worker in self.workers.values():
+                if worker.process.poll() is not None:
+                    raise ServerStartError(
+                        f"worker {worker.identity.decode()} exited with {worker.process.returncode}"
+                    )
+            if time.monotonic() > deadline:
+                raise ServerStartError("workers did not start in time")
+            if self._backend.poll(100):
+                self._serve_backend()
+
+    def _spawn_worker(self) -> None:
+        identity = f"w{next(self._generation)}".encode()
+        process = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "controller_server.worker",
+                identity.decode(),
+                self._backend_endpoint,
+                self.config.to_json(),
+            ],
+            env={**os.environ, **SINGLE_THREADED_BLAS},
+        )
+        self.workers[identity] = _Worker(identity, process)
+
+    # ----------------------------------------------------------------- loop
+
+    def serve_forever(self) -> None:
+        """Serve until :attr:`stop_event` is set, drain for up to a second, then close."""
+        poller = zmq.Poller()
+        poller.register(self._frontend, zmq.POLLIN)
+        poller.register(self._backend, zmq.POLLIN)
+        last_expiry_check = time.monotonic()
+        log.info("serving on %s", ", ".join(self.bound_endpoints))
+        try:
+            while not self.stop_event.is_set():
+                self._turn(poller)
+                now = time.monotonic()
+                if now - last_expiry_check > EXPIRY_CHECK_INTERVAL_S:
+                    self.expire_sessions(now)
+                    last_expiry_check = now
+            self._drain(poller)
+        finally:
+            self.close()
+
+    def _turn(self, poller: zmq.Poller) -> None:
+        events = dict(poller.poll(self._poll_timeout_ms()))
+        if self._backend in events:
+            for _ in range(1000):  # replies first: they free clients
+                self._serve_backend()
+                if not self._backend.poll(0):
+                    break
+        if self._frontend in events:
+            self._serve_frontend()
+        self._enforce_deadlines(time.monotonic())
+
+    def _drain(self, poller: zmq.Poller) -> None:
+        """Answer what has arrived and what is in flight, for at most :data:`DRAIN_S`."""
+        end = time.monotonic() + DRAIN_S
+        while time.monotonic() < end:
+            busy = any(w.pending for w in self.workers.values()) or self._gathers
+            if not busy and not self._frontend.poll(0):
+                break
+            self._turn(poller)
+        for worker in self.workers.values():
+            for pending in worker.pending.values():
+                self._answer_late(pending, "the server is stopping")
+
+    def _poll_timeout_ms(self) -> int:
+        soonest = time.monotonic() + POLL_INTERVAL_S
+        for worker in self.workers.values():
+            for pending in worker.pending.values():
+                if not pending.answered:
+                    soonest = min(soonest, pending.deadline_s)
+                    break  # served in order: the first unanswered is the one due
+        return max(0, int((soonest - time.monotonic()) * 1000) + 1)
+
+    # ----------------------------------------------------------------- clients
+
+    def _serve_frontend(self) -> None:
+        frames = self._frontend.recv_multipart(copy=False)
+        identity = frames[0].bytes
+        if len(frames) != 2:
+            detail = f"expected one frame per message, got {len(frames) - 1}"
+            self._reply(identity, _error(-1, ErrorCode.MALFORMED, "", detail))
+            return
+        frame = frames[1]
+        client = (frame.get("User-Id") if self._curve else "") or frame.get("Peer-Address") or ""
+        payload = frame.bytes
+        if len(payload) > self.config.max_message_bytes:
+            self._reply(
+                identity,
+                _error(
+                    -1,
+                    ErrorCode.LIMIT_EXCEEDED,
+                    "",
+                    f"message of {len(payload)} bytes exceeds the server's limit of "
+                    f"{self.config.max_message_bytes} (`poise serve --max-message-bytes`)",
+                ),
+            )
+            return
+        self._route(identity, client, payload)
+
+    def _route(self, identity: bytes, client: str, payload: bytes) -> None:
+        kind, seq = _peek(payload)
+        route = self.routes.get(identity)
+        if route is not None and route.client != client:
+            route = None  # another peer reusing this routing id: not its session
+        elif route is not None and route.worker not in self.workers:
+            self._unroute(identity, route)  # its worker was replaced: the session is gone
+            route = None
+        if kind == "hello":
+            self._open(identity, client, route, seq, payload)
+        elif kind == "stats":
+            self._gather_stats(identity, client, payload)
+        elif route is not None:
+            self._forward(identity, route, seq, payload, self.config.deadline_s)
+        else:  # no session: the local table says what is wrong (NO_SESSION at least)
+            self._reply(identity, self._local.handle(identity, payload))
+
+    def _open(
+        self, identity: bytes, client: str, route: _Route | None, seq: int, payload: bytes
+    ) -> None:
+        now = time.monotonic()
+        if route is None:
+            refusal = self._session_cap_refusal(client)
+            if refusal:
+                self._reply(identity, _error(seq, ErrorCode.LIMIT_EXCEEDED, "", refusal))
+                return
+            ready = [w for w in self.workers.values() if w.ready]
+            if not ready:
+                self._reply(
+                    identity,
+                    _error(seq, ErrorCode.LIMIT_EXCEEDED, "", "no worker is ready; retry"),
+                )
+                return
+            worker = min(ready, key=lambda w: (len(w.routes), len(w.pending)))
+            old = self.routes.pop(identity, None)
+            if old is not None:  # a different peer's session on this routing id
+                self._drop_route(identity, old)
+            route = _Route(next(self._ids).to_bytes(8, "little"), worker.identity, client, now)
+            self.routes[identity] = route
+            worker.routes.add(identity)
+        self._forward(identity, route, seq, payload, self.config.hello_deadline_s)
+
+    def _session_cap_refusal(self, client: str) -> str:
+        if len(self.routes) >= self.config.max_sessions:
+            return (
+                f"the server holds {len(self.routes)} sessions, its limit "
+                "(`poise serve --max-sessions`); retry later"
+            )
+        own = sum(route.client == client for route in self.routes.values())
+        if own >= self.config.max_sessions_per_client:
+            return (
+                f"this client holds {own} sessions, the limit per client "
+                "(`poise serve --max-sessions-per-client`); close some with bye"
+            )
+        return ""
+
+    def _forward(
+        self, identity: bytes, route: _Route, seq: int, payload: bytes, deadline_s: float
+    ) -> None:
+        worker = self.workers[route.worker]
+        if route.in_flight >= self.config.max_in_flight:
+            self._reply(
+                identity,
+                _error(
+                    seq,
+                    ErrorCode.LIMIT_EXCEEDED,
+                    "",
+                    f"{route.in_flight} requests of this session are still being served "
+                    "(`poise serve --max-in-flight`); wait for their replies",
+                ),
+            )
+            return
+        now = time.monotonic()
+        route.last_seen_s = now
+        route.in_flight += 1
+        request_id = next(self._ids).to_bytes(8, "little")
+        worker.pending[request_id] = _Pending(
+            identity, seq, route, now + deadline_s, now + deadline_s + self.config.recycle_after_s
+        )
+        self._to_worker(
+            [
+                worker.identity,
+                b"req",
+                request_id,
+                route.key,
+                DEADLINE.pack(now + deadline_s),
+                payload,
+            ]
+        )
+
+    def _to_worker(self, frames: list[bytes]) -> None:
+        try:
+            self._backend.send_multipart(frames, zmq.NOBLOCK)
+        except zmq.ZMQError as exc:  # a dead worker: its requests time out, it is replaced
+            log.warning("worker %s unreachable: %s", frames[0].decode(), exc)
+
+    def _reply(self, identity: bytes, message: Message) -> None:
+        self._send(identity, encode(message))
+
+    def _send(self, identity: bytes, data: bytes) -> None:
+        try:
+            self._frontend.send_multipart([identity, data], zmq.NOBLOCK)
+        except zmq.Again:
+            log.warning("client's queue is full: reply dropped")
+
+    # ----------------------------------------------------------------- workers
+
+    def _serve_backend(self) -> None:
+        frames = self._backend.recv_multipart()
+        worker = self.workers.get(frames[0])
+        if worker is None:
+            return  # a recycled worker's last words
+        kind = frames[1]
+        if kind == b"ready":
+            worker.ready = True
+            log.info("worker %s ready", worker.identity.decode())
+        elif kind in (b"rep", b"late"):
+            pending = worker.pending.pop(frames[2], None)
+            if pending is None:
+                return
+            pending.route.in_flight -= 1
+            if kind == b"rep":
+                self._settle(pending, session_open=frames[3] == b"1", reply=frames[4])
+        elif kind == b"stats":
+            self._collect_stats(worker.identity, frames[2], frames[3])
+
+    def _settle(self, pending: _Pending, session_open: bool, reply: bytes) -> None:
+        route = self.routes.get(pending.identity)
+        if not session_open and route is pending.route:
+            self._unroute(pending.identity, route)
+        if not pending.answered:
+            self._send(pending.identity, reply)
+
+    def _enforce_deadlines(self, now: float) -> None:
+        for worker in list(self.workers.values()):
+            for pending in worker.pending.values():
+                if not pending.answered and now > pending.deadline_s:
+                    self._answer_late(
+                        pending,
+                        "not served within the server's deadline (`poise serve --deadline`); "
+                        "nothing was computed for it that can reach an actuator",
+                    )
+            first = next(iter(worker.pending.values()), None)
+            if first is not None and now > first.recycle_s:
+                self._recycle(worker)
+            elif worker.process.poll() is not None:
+                log.error(
+                    "worker %s died (%s)", worker.identity.decode(), worker.process.returncode
+                )
+                self._recycle(worker)
+        for request_id in [rid for rid, g in self._gathers.items() if now > g.deadline_s]:
+            self._finish_gather(request_id)
+
+    def _answer_late(self, pending: _Pending, detail: str) -> None:
+        if not pending.answered:
+            pending.answered = True
+            self._reply(
+                pending.identity, _error(pending.seq, ErrorCode.DEADLINE_EXCEEDED, "", detail)
+            )
+
+    def _recycle(self, worker: _Worker) -> None:
+        """Kill a stuck or dead worker, forget its sessions, start a fresh one."""
+        log.warning(
+            "worker %s stuck or dead: replaced; its %d sessions are lost",
+            worker.identity.decode(),
+            len(worker.routes),
+        )
+        worker.process.kill()
+        worker.process.wait()
+        for pending in worker.pending.values():
+            self._answer_late(pending, "the worker serving this session failed; send hello")
+        for identity in list(worker.routes):
+            route = self.routes.get(identity)
+            if route is not None and route.worker == worker.identity:
+                del self.routes[identity]
+        del self.workers[worker.identity]
+        if not self.stop_event.is_set():
+            self._spawn_worker()
+
+    # ----------------------------------------------------------------- sessions
+
+    def _unroute(self, identity: bytes, route: _Route) -> None:
+        if self.routes.get(identity) is route:
+            del self.routes[identity]
+        worker = self.workers.get(route.worker)
+        if worker is not None:
+            worker.routes.discard(identity)
+
+    def _drop_route(self, identity: bytes, route: _Route) -> None:
+        self._unroute(identity, route)
+        if route.worker in self.workers:
+            self._to_worker([route.worker, b"drop", route.key])
+
+    def expire_sessions(self, now_s: float) -> int:
+        """Drop sessions idle longer than the timeout (none in flight); return how many."""
+        expired = [
+            (identity, route)
+            for identity, route in self.routes.items()
+            if route.in_flight == 0 and now_s - route.last_seen_s > self.config.session_timeout_s
+        ]
+        for identity, route in expired:
+            self._drop_route(identity, route)
+        if expired:
+            log.info("%d sessions expired", len(expired))
+        return len(expired)
+
+    def _gather_stats(self, identity: bytes, client: str, payload: bytes) -> None:
         try:
             request = decode(payload)
-            seq = request.seq
-            return self._dispatch(identity, request)
-        except ProtocolError as exc:
-            session = self.sessions.get(identity)
-            if session is not None:
-                session.errors += 1
-            return Error(
-                seq=exc.seq if exc.seq >= 0 else seq,
-                code=exc.code,
-                field=exc.field,
-                detail=exc.detail,
-            )
-        except Exception as exc:  # a controller bug must not take the server down
-            log.exception("internal error while serving %r", identity)
-            return Error(seq=seq, code=ErrorCode.INTERNAL, detail=f"{type(exc).__name__}: {exc}")
-
-    def _dispatch(self, identity: bytes, request: Message) -> Message:
-        if isinstance(request, Hello):
-            try:
-                session = Session(request)
-            except ProtocolError as exc:
-                exc.seq = request.seq
-                raise
-            self.sessions[identity] = session
-            log.info(
-                "session %s: model %s, controller %s",
-                session.session_id[:8],
-                session.robot.name,
-                session.controller.name,
-            )
-            return session.welcome(request.seq)
-        if isinstance(request, Stats):
-            if request.sessions is not None:
+            if not isinstance(request, Stats) or request.sessions is not None:
                 raise ProtocolError(
                     ErrorCode.UNEXPECTED_MESSAGE,
                     "sessions",
                     "a stats request carries no sessions",
                     request.seq,
                 )
-            now = time.monotonic()
-            return Stats(seq=request.seq, sessions=[s.stats(now) for s in self.sessions.values()])
-        if not isinstance(request, State | SetParams | Bye):
-            raise ProtocolError(
-                ErrorCode.UNEXPECTED_MESSAGE,
-                "type",
-                f"{request.type!r} is a reply; send hello, state, set_params, stats or bye",
-                request.seq,
-            )
-        session = self.sessions.get(identity)
-        if session is None:
-            raise ProtocolError(
-                ErrorCode.NO_SESSION,
-                "type",
-                "no session for this client: send hello first",
-                request.seq,
-            )
-        session.last_seen_s = time.monotonic()
-        if isinstance(request, Bye):
-            del self.sessions[identity]
-            return Bye(seq=request.seq)
-        try:
-            if isinstance(request, State):
-                return session.step(request)
-            return session.set_params(request)
         except ProtocolError as exc:
-            exc.seq = request.seq
-            raise
+            self._reply(identity, _error(exc.seq, exc.code, exc.field, exc.detail))
+            return
+        visible: dict[bytes, list[bytes]] = {}
+        for route in self.routes.values():
+            if self.config.stats_all or route.client == client:
+                visible.setdefault(route.worker, []).append(route.key)
+        request_id = next(self._ids).to_bytes(8, "little")
+        gather = _Gather(
+            identity, request.seq, time.monotonic() + self.config.deadline_s, set(visible)
+        )
+        self._gathers[request_id] = gather
+        for worker, keys in visible.items():
+            self._to_worker([worker, b"stats", request_id, *keys])
+        self._finish_gather(request_id)
 
-    def expire_sessions(self, now_s: float) -> list[str]:
-        """Drop sessions idle longer than the timeout; return their ids."""
-        expired = [
-            identity
-            for identity, session in self.sessions.items()
-            if now_s - session.last_seen_s > self.session_timeout_s
-        ]
-        for identity in expired:
-            log.info("session %s expired", self.sessions[identity].session_id[:8])
-        return [self.sessions.pop(identity).session_id for identity in expired]
+    def _collect_stats(self, worker: bytes, request_id: bytes, data: bytes) -> None:
+        gather = self._gathers.get(request_id)
+        if gather is None or worker not in gather.waiting:
+            return
+        gather.waiting.discard(worker)
+        gather.sessions += [SessionStats.model_validate(s) for s in msgpack.unpackb(data)]
+        self._finish_gather(request_id)
 
-    def serve_forever(self) -> None:
-        """Serve until :attr:`stop_event` is set, then close the socket."""
-        poller = zmq.Poller()
-        poller.register(self._socket, zmq.POLLIN)
-        last_expiry_check = time.monotonic()
-        log.info("serving on %s", ", ".join(self.bound_endpoints))
-        try:
-            while not self.stop_event.is_set():
-                if poller.poll(POLL_INTERVAL_MS):
-                    self._serve_one()
-                now = time.monotonic()
-                if now - last_expiry_check > EXPIRY_CHECK_INTERVAL_S:
-                    self.expire_sessions(now)
-                    last_expiry_check = now
-        finally:
-            self.close()
-
-    def _serve_one(self) -> None:
-        frames = self._socket.recv_multipart(copy=True)
-        identity, body = frames[0], frames[1:]
-        if len(body) != 1:
-            reply: Message = Error(
-                code=ErrorCode.MALFORMED, detail=f"expected one frame per message, got {len(body)}"
+    def _finish_gather(self, request_id: bytes) -> None:
+        gather = self._gathers[request_id]
+        if gather.waiting and time.monotonic() < gather.deadline_s:
+            return
+        del self._gathers[request_id]
+        if gather.waiting:
+            self._reply(
+                gather.identity,
+                _error(gather.seq, ErrorCode.DEADLINE_EXCEEDED, "", "a worker did not report"),
             )
         else:
-            reply = self.handle(identity, body[0])
-        self._socket.send_multipart([identity, encode(reply)])
+            self._reply(gather.identity, Stats(seq=gather.seq, sessions=gather.sessions))
+
+    # ----------------------------------------------------------------- shutdown
 
     def close(self) -> None:
-        """Close the socket and the ZeroMQ context."""
-        self._socket.close(linger=0)
+        """Stop the workers, close the sockets and the ZeroMQ context."""
+        for worker in self.workers.values():
+            if worker.ready and worker.process.poll() is None:
+                try:
+                    self._backend.send_multipart([worker.identity, b"stop"], zmq.NOBLOCK)
+                except zmq.ZMQError:
+                    pass
+        for worker in self.workers.values():
+            try:
+                worker.process.wait(2.0)
+            except subprocess.TimeoutExpired:
+                worker.process.kill()
+                worker.process.wait()
+        self.workers.clear()
+        if self._authenticator is not None:
+            self._authenticator.stop()
+        self._frontend.close(linger=0)
+        self._backend.close(linger=0)
         self._context.term()
+        shutil.rmtree(self._runtime_dir, ignore_errors=True)

@@ -21,7 +21,13 @@ from protocol.messages import Command, Diagnostics, PriorityLevelReport, State
 
 __all__ = ["command_from_output", "control_input_from_state"]
 
-MIN_QUATERNION_NORM = 1e-6
+QUATERNION_NORM_TOLERANCE = 0.1
+"""A wire quaternion's norm must lie within 1 ± this; the server normalises it.
+
+Rounding and float32 sensors are off by 1e-7; a quaternion 10 % off unit
+length is a client bug (it once turned into a rotation with determinant 1.5e5),
+refused with the field named rather than silently rescaled.
+"""
 
 
 def _check_length(field: str, array: np.ndarray, expected: int, seq: int) -> None:
@@ -36,8 +42,14 @@ def _check_length(field: str, array: np.ndarray, expected: int, seq: int) -> Non
 
 def _check_quaternion(field: str, quaternion: np.ndarray, seq: int) -> None:
     norm = float(np.linalg.norm(quaternion))
-    if norm < MIN_QUATERNION_NORM:
-        raise ProtocolError(ErrorCode.INVALID_FIELD, field, f"quaternion has norm {norm:.3g}", seq)
+    if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+        raise ProtocolError(
+            ErrorCode.INVALID_FIELD,
+            field,
+            f"quaternion has norm {norm:.3g}; send a unit quaternion xyzw "
+            f"(within {QUATERNION_NORM_TOLERANCE:g}, the server normalises)",
+            seq,
+        )
 
 
 def control_input_from_state(
@@ -47,7 +59,8 @@ def control_input_from_state(
 
     Raises:
         ProtocolError: ``BAD_SHAPE`` (wrong lengths) or ``INVALID_FIELD``
-            (zero quaternion), naming the field.
+            (a quaternion not of unit length within
+            :data:`QUATERNION_NORM_TOLERANCE`), naming the field.
     """
     seq = state.seq
     _check_length("joint_position", state.joint_position, robot.nq_joints, seq)
@@ -69,13 +82,13 @@ def control_input_from_state(
     if starts.size:
         quaternions = state.joint_position[robot.ball_quaternion_index].reshape(-1, 4)
         squared_norms = np.einsum("ij,ij->i", quaternions, quaternions)
-        if squared_norms.min() < MIN_QUATERNION_NORM**2:
-            _check_quaternion("joint_position", quaternions[np.argmin(squared_norms)], seq)
+        worst = int(np.argmax(np.abs(squared_norms - 1.0)))
+        _check_quaternion("joint_position", quaternions[worst], seq)
 
     q = np.concatenate(
         [state.position_base_in_world, state.orientation_base_in_world_xyzw, state.joint_position]
     )
-    pin.normalize(robot.model, q)
+    q = pin.normalize(robot.model, q)  # returns the normalised copy
     rotation_base_to_world = pin.Quaternion(q[3:7]).toRotationMatrix()
     v = np.concatenate(
         [

@@ -14,7 +14,14 @@ import numpy as np
 from pydantic import BeforeValidator, PlainSerializer, WithJsonSchema
 from pydantic_core import PydanticCustomError
 
-__all__ = ["FiniteArray", "FloatArray", "QuaternionXYZW", "Vector3", "array_to_bytes"]
+__all__ = [
+    "FiniteArray",
+    "FloatArray",
+    "QuaternionXYZW",
+    "Vector3",
+    "array_to_bytes",
+    "bounded_array",
+]
 
 WIRE_DTYPE = np.dtype("<f8")
 
@@ -24,7 +31,9 @@ def array_to_bytes(array: np.ndarray) -> bytes:
     return np.ascontiguousarray(array, dtype=WIRE_DTYPE).tobytes()
 
 
-def _parse(value: Any, *, length: int | None, finite: bool) -> np.ndarray:
+def _parse(
+    value: Any, *, length: int | None, finite: bool, bound: float | None = None
+) -> np.ndarray:
     if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1:
         array = value.copy()  # the common case in code: no conversion, no shape checks
     elif isinstance(value, bytes | bytearray | memoryview):
@@ -66,20 +75,37 @@ def _parse(value: Any, *, length: int | None, finite: bool) -> np.ndarray:
             "values must be finite, got NaN/inf at index {index}",
             {"index": int(np.flatnonzero(~np.isfinite(array))[0])},
         )
+    if bound is not None and array.size and np.abs(array).max() > bound:
+        index = int(np.argmax(np.abs(array)))
+        raise PydanticCustomError(
+            "out_of_range",
+            "|value| must be at most {bound}, got {value} at index {index}",
+            {"bound": f"{bound:g}", "value": f"{float(array[index]):.3g}", "index": index},
+        )
     if array.flags.writeable:
         array.setflags(write=False)
     return array
 
 
-def _array_type(length: int | None, finite: bool) -> Any:
+def _array_type(length: int | None, finite: bool, bound: float | None = None) -> Any:
     return Annotated[
         np.ndarray,
-        BeforeValidator(lambda value: _parse(value, length=length, finite=finite)),
+        BeforeValidator(lambda value: _parse(value, length=length, finite=finite, bound=bound)),
         PlainSerializer(array_to_bytes, return_type=bytes),
         WithJsonSchema(
             {"type": "string", "format": "binary", "description": "little-endian float64"}
         ),
     ]
+
+
+def bounded_array(bound: float, length: int | None = None) -> Any:
+    """A finite float64 array whose every entry satisfies ``|x| <= bound``.
+
+    Requests use it for magnitudes no robot reaches (a joint turning at 10⁴
+    rad/s is a client bug, not a state): refused at the edge with the field
+    named, before a controller sees them.
+    """
+    return _array_type(length, finite=True, bound=bound)
 
 
 FloatArray = _array_type(None, finite=False)

@@ -33,7 +33,7 @@ def encode(message: Message) -> bytes:
 
 def _seq_of(payload: dict[Any, Any]) -> int:
     seq = payload.get("seq")
-    return seq if isinstance(seq, int) and 0 <= seq < 2**63 else -1
+    return seq if type(seq) is int and 0 <= seq < 2**63 else -1
 
 
 def decode(data: bytes) -> Message:

@@ -14,10 +14,15 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from protocol.arrays import FiniteArray, FloatArray, QuaternionXYZW, Vector3
+from protocol.arrays import FloatArray, QuaternionXYZW, Vector3, bounded_array
 from protocol.errors import ErrorCode
 
 __all__ = [
+    "MAX_ABS_JOINT_POSITION",
+    "MAX_ABS_POSITION_M",
+    "MAX_ABS_TIME_S",
+    "MAX_ABS_VELOCITY",
+    "MAX_ABS_WRENCH",
     "MESSAGE_TYPES",
     "PROTOCOL_VERSION",
     "Bye",
@@ -40,6 +45,23 @@ __all__ = [
 
 PROTOCOL_VERSION = 1
 """Version of this wire contract; a message with another version is refused."""
+
+MAX_ABS_POSITION_M = 1e4
+"""Largest base position coordinate a ``state`` may carry (m)."""
+MAX_ABS_JOINT_POSITION = 1e3
+"""Largest joint position (rad, or m for prismatic joints): multi-turn joints fit."""
+MAX_ABS_VELOCITY = 1e3
+"""Largest velocity entry (rad/s and m/s): about 10⁴ rpm, beyond any actuator."""
+MAX_ABS_WRENCH = 1e6
+"""Largest measured contact force or torque entry (N, N·m)."""
+MAX_ABS_TIME_S = 1e12
+"""Largest client time (s); Unix time fits."""
+
+JointPositionArray = bounded_array(MAX_ABS_JOINT_POSITION)
+VelocityArray = bounded_array(MAX_ABS_VELOCITY)
+Velocity3 = bounded_array(MAX_ABS_VELOCITY, 3)
+Position3 = bounded_array(MAX_ABS_POSITION_M, 3)
+WrenchArray = bounded_array(MAX_ABS_WRENCH)
 
 ParamValue = float | int | bool | str | list[float] | dict[str, float | str | list[float]] | None
 """A controller parameter: a number, flag, name, vector, a small record
@@ -69,7 +91,7 @@ class Message(_Strict):
         "Protocol version; must equal the server's.", default=PROTOCOL_VERSION
     )
     seq: int = wire_field(
-        "Request sequence number; replies echo it.", default=0, ge=0, le=2**63 - 1
+        "Request sequence number; replies echo it.", default=0, ge=0, le=2**63 - 1, strict=True
     )
 
 
@@ -183,37 +205,46 @@ class State(Message):
     """Robot state measured by the client at ``time_s``."""
 
     type: Literal["state"] = "state"
-    time_s: float = wire_field("Client time.", unit="s", allow_inf_nan=False)
-    joint_position: FiniteArray = wire_field(
-        "Joint positions in wire order; a ball joint is a quaternion xyzw of child in parent.",
+    time_s: float = wire_field(
+        f"Client time, |t| ≤ {MAX_ABS_TIME_S:g}.",
+        unit="s",
+        allow_inf_nan=False,
+        ge=-MAX_ABS_TIME_S,
+        le=MAX_ABS_TIME_S,
+    )
+    joint_position: JointPositionArray = wire_field(
+        "Joint positions in wire order, each |q| ≤ 1000; a ball joint is a quaternion xyzw of "
+        "child in parent, unit length within 10 % (normalised by the server).",
         shape="Σ nq",
         unit="rad (m)",
         frame="joint",
     )
-    joint_velocity: FiniteArray = wire_field(
-        "Joint velocities in wire order; a ball joint's is in its child frame.",
+    joint_velocity: VelocityArray = wire_field(
+        "Joint velocities in wire order, each |v| ≤ 1000; a ball joint's is in its child frame.",
         shape="Σ nv",
         unit="rad/s (m/s)",
         frame="joint",
     )
-    position_base_in_world: Vector3 = wire_field(
-        "Base (root body) origin.", shape="3", unit="m", frame="world"
+    position_base_in_world: Position3 = wire_field(
+        "Base (root body) origin, each |x| ≤ 10⁴.", shape="3", unit="m", frame="world"
     )
     orientation_base_in_world_xyzw: QuaternionXYZW = wire_field(
-        "Base orientation, scalar last; normalised by the server.", shape="4", frame="world"
+        "Base orientation, scalar last; unit length within 10 %, normalised by the server.",
+        shape="4",
+        frame="world",
     )
-    linear_velocity_base_in_world: Vector3 = wire_field(
-        "Velocity of the base origin.", shape="3", unit="m/s", frame="world"
+    linear_velocity_base_in_world: Velocity3 = wire_field(
+        "Velocity of the base origin, each |v| ≤ 1000.", shape="3", unit="m/s", frame="world"
     )
-    angular_velocity_base_in_base: Vector3 = wire_field(
-        "Base angular velocity.", shape="3", unit="rad/s", frame="base"
+    angular_velocity_base_in_base: Velocity3 = wire_field(
+        "Base angular velocity, each |ω| ≤ 1000.", shape="3", unit="rad/s", frame="base"
     )
     contact_flags: list[bool] = wire_field(
         "Per contact (welcome order): is it a support this tick.", shape="contacts"
     )
-    contact_wrench_in_world: FiniteArray | None = wire_field(
+    contact_wrench_in_world: WrenchArray | None = wire_field(
         "Measured ground wrench per contact (force, then torque about the contact frame "
-        "origin); required in `ground_force_mode` `measured`.",
+        "origin), each entry ≤ 10⁶ in size; required in `ground_force_mode` `measured`.",
         shape="contacts × 6",
         unit="N, N·m",
         frame="world",
@@ -427,7 +458,9 @@ class Error(Message):
     """Reply to a request the server could not serve."""
 
     type: Literal["error"] = "error"
-    seq: int = wire_field("Seq of the bad request, -1 if it was unreadable.", default=-1, ge=-1)
+    seq: int = wire_field(
+        "Seq of the bad request, -1 if it was unreadable.", default=-1, ge=-1, strict=True
+    )
     code: ErrorCode = wire_field("Error code (see the error table).")
     field: str = wire_field(
         'Dotted path of the offending key, `""` for the whole message.', default=""

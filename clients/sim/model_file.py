@@ -15,7 +15,7 @@ from pathlib import Path
 
 from clients.sim.backend import ContactPoint
 
-__all__ = ["builtin_model_path", "resolve_model_path", "sole_contact_points"]
+__all__ = ["builtin_model_path", "hello_model", "resolve_model_path", "sole_contact_points"]
 
 
 def builtin_model_path(name: str) -> Path:
@@ -33,6 +33,21 @@ def resolve_model_path(model: str) -> Path:
     """A built-in name or a file path."""
     path = Path(model)
     return path if path.suffix and path.is_file() else builtin_model_path(model)
+
+
+def hello_model(model: str) -> dict[str, str]:
+    """The ``hello`` fields naming ``model``: a built-in by name, a file by its text.
+
+    A server reads files only from its own model directories, and may run on
+    another machine; the simulator has the file, so it sends what it simulates.
+    """
+    path = Path(model)
+    if not (path.suffix and path.is_file()):
+        return {"model": model}
+    return {
+        "model_text": path.read_text(),
+        "model_format": "urdf" if path.suffix == ".urdf" else "mjcf",
+    }
 
 
 def sole_contact_points(path: Path) -> list[ContactPoint]:

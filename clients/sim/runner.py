@@ -25,7 +25,7 @@ import pinocchio as pin
 from clients.client import ControllerClient, ServerError
 from clients.layout import joint_slices, neutral_joint_position
 from clients.sim.backend import PhysicsBackend, Push
-from clients.sim.model_file import resolve_model_path
+from clients.sim.model_file import hello_model, resolve_model_path
 from clients.sim.scenario import Scenario
 from clients.state import RobotState
 from protocol.messages import Command, Diagnostics, Welcome
@@ -178,7 +178,7 @@ def run_scenario(
     measured = scenario.ground_force_mode == "measured"
     with ControllerClient(endpoint, timeout_s=timeout_s) as client:
         welcome = client.connect(
-            scenario.model,
+            **hello_model(scenario.model),
             controller=scenario.controller,
             # Only the weighted controllers have a measured mode; distributed is their default.
             params={**scenario.params, **({"ground_force_mode": "measured"} if measured else {})},

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,10 +40,12 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.errors import InvalidParams
+from controller_server.files import ServerFileKind, display_name
 from controller_server.models import RobotModel
 
 __all__ = [
     "CLIPS_DIR",
+    "CLIP_FILES",
     "ClipSample",
     "MotionClip",
     "load_motion_clip",
@@ -57,6 +60,20 @@ MIN_QUATERNION_NORM = 1e-6
 _BASE_NV = 6
 
 
+def _fail(detail: str) -> InvalidParams:
+    return InvalidParams(FIELD, detail)
+
+
+CLIP_FILES = ServerFileKind(
+    kind="clip",
+    field=FIELD,
+    builtin={path.stem: path for path in sorted(CLIPS_DIR.glob("*.json"))},
+    suffixes=(".json",),
+    not_found=_fail,
+)
+"""The clip files ``params.clip`` may name: built-ins, or files in the model directories."""
+
+
 class ClipSample(NamedTuple):
     """Reference of eq. 5.3 at one instant, in Pinocchio conventions.
 
@@ -69,10 +86,6 @@ class ClipSample(NamedTuple):
     q: np.ndarray
     v: np.ndarray
     a: np.ndarray
-
-
-def _fail(detail: str) -> InvalidParams:
-    return InvalidParams(FIELD, detail)
 
 
 def _derivatives(
@@ -384,53 +397,59 @@ class MotionClip:
         return text
 
 
-def _resolve_path(path_or_name: str | Path) -> Path:
-    text = str(path_or_name)
-    if isinstance(path_or_name, str) and "/" not in text and not text.endswith(".json"):
-        path = CLIPS_DIR / f"{text}.json"
-    else:
-        path = Path(path_or_name)
-    if not path.is_file():
-        builtin = sorted(p.stem for p in CLIPS_DIR.glob("*.json"))
-        raise _fail(
-            f"{text!r} is neither a built-in clip ({', '.join(builtin)}) "
-            "nor a readable .json file on the server"
-        )
-    return path
+def _check_joint_names(joint_names: Any, robot: RobotModel) -> None:
+    """The clip's joints must be the robot's in wire order; the message quotes only the robot's."""
+    expected = [joint.name for joint in robot.joints]
+    if joint_names == expected:
+        return
+    if not isinstance(joint_names, list):
+        raise _fail(f"clip `joint_names` must be a list of the joints of {robot.name!r}")
+    index = next(
+        (i for i, name in enumerate(expected) if i >= len(joint_names) or joint_names[i] != name),
+        len(expected),
+    )
+    where = (
+        f"at index {index} the robot has {expected[index]!r}"
+        if index < len(expected)
+        else f"the robot has only {len(expected)} joints"
+    )
+    raise _fail(
+        f"clip `joint_names` differ from the joints of {robot.name!r} in wire order: {where}"
+    )
 
 
 def load_motion_clip(path_or_name: str | Path, robot: RobotModel) -> MotionClip:
     """Load a clip file for ``robot`` (reference of Macchietto 2008, eq. 5.3).
 
     Args:
-        path_or_name: A built-in clip name (no slash, no ``.json``), looked up
-            in :data:`CLIPS_DIR`, or the path of a clip file.
+        path_or_name: A built-in clip name (a file of :data:`CLIPS_DIR`
+            without ``.json``), or the path of a ``.json`` file in the
+            server's model directories (see :data:`CLIP_FILES`).
         robot: The robot; the clip's ``joint_names`` must equal its joints in order.
 
     Returns:
         The clip with manifold finite-difference velocities and accelerations.
 
     Raises:
-        InvalidParams: ``params.clip``: unknown file, bad JSON, other joints,
-            wrong row lengths, non-finite values, non-increasing times or
-            fewer than 2 frames.
+        InvalidParams: ``params.clip``: unknown or unreadable file (one
+            message whatever the reason), bad JSON, other joints, wrong row
+            lengths, non-finite values, non-increasing times or fewer than 2
+            frames. Messages name the clip as given, never its server path.
+        ProtocolError: ``LIMIT_EXCEEDED`` for a file over the size cap.
     """
-    path = _resolve_path(path_or_name)
+    name = os.fspath(path_or_name)
+    _, text = CLIP_FILES.read_text(name)
+    shown = display_name(name)
     try:
-        document = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise _fail(f"{str(path)!r} is not a readable JSON clip: {exc}") from None
+        document = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as exc:
+        raise _fail(f"{shown} is not a JSON clip: {exc}") from None
     if not isinstance(document, dict):
-        raise _fail(f"{str(path)!r} must hold a JSON object, got {type(document).__name__}")
+        raise _fail(f"{shown} must hold a JSON object, got {type(document).__name__}")
     missing = [key for key in ("joint_names", "time_s", "joint_position") if key not in document]
     if missing:
-        raise _fail(f"{str(path)!r} lacks {', '.join(missing)}")
-    expected = [joint.name for joint in robot.joints]
-    if document["joint_names"] != expected:
-        raise _fail(
-            f"clip joint_names {document['joint_names']!r} differ from the joints of "
-            f"{robot.name!r} in wire order: {expected!r}"
-        )
+        raise _fail(f"{shown} lacks {', '.join(missing)}")
+    _check_joint_names(document["joint_names"], robot)
     time_s = document["time_s"]
     if not isinstance(time_s, list):
         raise _fail(f"`time_s` must be a list of numbers, got {type(time_s).__name__}")
@@ -439,7 +458,7 @@ def load_motion_clip(path_or_name: str | Path, robot: RobotModel) -> MotionClip:
         time_s,
         document["joint_position"],
         document.get("orientation_base_in_world_xyzw"),
-        name=str(document.get("name", path.stem)),
+        name=str(document.get("name", Path(name).stem)),
     )
 
 

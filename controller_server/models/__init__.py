@@ -2,9 +2,20 @@
 
 from controller_server.models.robot_model import (
     BUILTIN_MODELS,
+    DEFAULT_MODEL_CACHE_SIZE,
+    MODEL_FILES,
     Contact,
     RobotModel,
     load_robot_model,
+    set_model_cache_size,
 )
 
-__all__ = ["BUILTIN_MODELS", "Contact", "RobotModel", "load_robot_model"]
+__all__ = [
+    "BUILTIN_MODELS",
+    "DEFAULT_MODEL_CACHE_SIZE",
+    "MODEL_FILES",
+    "Contact",
+    "RobotModel",
+    "load_robot_model",
+    "set_model_cache_size",
+]

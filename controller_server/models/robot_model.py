@@ -6,13 +6,14 @@ torque and position limits, and the contacts (feet with their sole points).
 It is immutable and shared by every session that uses the same file; each
 session keeps its own ``pinocchio.Data``.
 
-Sources: a built-in name (:data:`BUILTIN_MODELS`), a file path on the server,
-or the file's text sent in ``hello``. MJCF and URDF are both read by
-Pinocchio; a free-flyer root is added where the file has none. For MJCF the
-torque limits come from the ``<actuator>`` motors (|gear| × ctrlrange) and
-the default contacts from ``*_sole`` box sites (the four corners of the box's
-x–y rectangle). URDF files give torque limits in ``<limit effort>`` and must
-name their contacts in ``hello``.
+Sources: a built-in name (:data:`BUILTIN_MODELS`), a file in the server's
+model directories (:mod:`controller_server.files`), or the file's text sent
+in ``hello``. MJCF and URDF are both read by Pinocchio; a free-flyer root is
+added where the file has none. For MJCF the torque limits come from the
+``<actuator>`` motors (|gear| × ctrlrange) and the default contacts from
+``*_sole`` box sites (the four corners of the box's x–y rectangle). URDF
+files give torque limits in ``<limit effort>`` and must name their contacts
+in ``hello``.
 """
 
 from __future__ import annotations
@@ -20,19 +21,29 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
-from functools import cache, cached_property
+from functools import cached_property, lru_cache
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
 from controller_server.errors import FrameNotFound, ModelError
+from controller_server.files import ServerFileKind
 from protocol.messages import ContactSpec, JointInfo
 
-__all__ = ["BUILTIN_MODELS", "Contact", "RobotModel", "load_robot_model"]
+__all__ = [
+    "BUILTIN_MODELS",
+    "DEFAULT_MODEL_CACHE_SIZE",
+    "MODEL_FILES",
+    "Contact",
+    "RobotModel",
+    "load_robot_model",
+    "set_model_cache_size",
+]
 
 DATA_DIR = Path(__file__).parent / "data"
 BUILTIN_MODELS: dict[str, Path] = {
@@ -41,6 +52,21 @@ BUILTIN_MODELS: dict[str, Path] = {
     "dino_biped": DATA_DIR / "dino_biped.xml",
 }
 """Built-in models by name (package data, MJCF so Pinocchio and MuJoCo agree)."""
+
+MODEL_FILES = ServerFileKind(
+    kind="model",
+    field="model",
+    builtin=BUILTIN_MODELS,
+    suffixes=(".xml", ".urdf"),
+    not_found=lambda detail: ModelError(detail, not_found=True),
+)
+"""The model files a ``hello`` may name: built-ins, or files in the model directories."""
+
+DEFAULT_MODEL_CACHE_SIZE = 16
+"""Loaded models kept (least recently used dropped first) unless set otherwise."""
+
+# Absolute paths of two or more components, as parser messages may carry them.
+_ABSOLUTE_PATH = re.compile(r"(?<![\w.~-])(?:/[\w.+~-]+){2,}/?")
 
 _JOINT_KINDS = {
     "JointModelRX": "revolute",
@@ -207,8 +233,26 @@ def _mjcf_root_body_position(root: ET.Element) -> np.ndarray:
     return np.array([float(x) for x in body.get("pos", "0 0 0").split()])
 
 
-def _build_pinocchio(path: Path, fmt: str) -> pin.Model:
-    """Parse with Pinocchio, adding a free-flyer root where the file has none."""
+def _parser_message(exc: Exception, path: Path, name: str) -> str:
+    """Pinocchio's message without server paths: the model's name for the file, no C++ trace.
+
+    Pinocchio prefixes its C++ source file, function and line (``From file:
+    … message:``); only the message is kept, the temporary file is named by
+    the model's name, and any other absolute path becomes ``<path>``.
+    """
+    text = str(exc)
+    _, marker, message = text.partition("message:")
+    text = message if marker else text
+    text = text.replace(str(path), repr(name))
+    return " ".join(_ABSOLUTE_PATH.sub("<path>", text).split())
+
+
+def _build_pinocchio(path: Path, fmt: str, name: str) -> pin.Model:
+    """Parse with Pinocchio, adding a free-flyer root where the file has none.
+
+    Raises:
+        ModelError: Pinocchio refused the file (message free of server paths).
+    """
     try:
         if fmt == "urdf":
             return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
@@ -218,7 +262,8 @@ def _build_pinocchio(path: Path, fmt: str) -> pin.Model:
                 str(path), pin.JointModelFreeFlyer(), "root"
             )
     except (RuntimeError, ValueError, IndexError) as exc:
-        raise ModelError(f"Pinocchio could not parse the {fmt.upper()} file: {exc}") from None
+        detail = _parser_message(exc, path, name)
+        raise ModelError(f"Pinocchio could not parse the {fmt.upper()} file: {detail}") from None
     return model
 
 
@@ -274,33 +319,31 @@ def load_robot_model(
     model_format: str = "mjcf",
     contacts: list[ContactSpec] | None = None,
 ) -> RobotModel:
-    """Load a robot from a built-in name, a server path, or file text.
+    """Load a robot from a built-in name, a file in the model directories, or file text.
 
     Args:
-        model: Built-in name (see :data:`BUILTIN_MODELS`) or path of a file.
+        model: Built-in name (see :data:`BUILTIN_MODELS`) or path of a file in
+            the server's model directories (see :data:`MODEL_FILES`); the
+            robot's name is then the file's stem.
         model_text: Text of an MJCF/URDF file (instead of ``model``).
         model_format: ``"mjcf"`` or ``"urdf"``; a path ending in ``.urdf`` is URDF.
         contacts: Contact definitions; default: the MJCF's ``*_sole`` box sites.
 
     Returns:
-        The model, cached: the same inputs give the same object.
+        The model, cached: the same inputs give the same object while they are
+        among the last :func:`set_model_cache_size` loaded.
 
     Raises:
-        ModelError: Not found, not parseable, unsupported joints or no contacts.
+        ModelError: Not found (one message whatever the reason), not
+            parseable, unsupported joints or no contacts.
+        ProtocolError: ``LIMIT_EXCEEDED`` for a file over the size cap.
     """
     if model_text is not None:
         text = model_text.encode()
         name = "client_model"
     elif model is not None:
-        path = BUILTIN_MODELS.get(model, Path(model))
-        if not path.is_file():
-            raise ModelError(
-                f"{model!r} is neither a built-in model ({', '.join(BUILTIN_MODELS)}) "
-                "nor a readable file on the server",
-                not_found=True,
-            )
-        text = path.read_bytes()
-        name = model if model in BUILTIN_MODELS else path.stem
+        path, text = MODEL_FILES.read_bytes(model)
+        name = model if model in BUILTIN_MODELS else Path(model).stem
         if path.suffix.lower() == ".urdf":
             model_format = "urdf"
     else:
@@ -313,8 +356,22 @@ def _contacts_json(contacts: list[ContactSpec]) -> str:
     return json.dumps([c.model_dump() for c in contacts], sort_keys=True)
 
 
-@cache
-def _load_cached(text: bytes, name: str, fmt: str, contacts_json: str | None) -> RobotModel:
+def set_model_cache_size(size: int) -> None:
+    """Keep the ``size`` most recently loaded models (emptying the cache).
+
+    Args:
+        size: Number of models kept, ≥ 1; the default is :data:`DEFAULT_MODEL_CACHE_SIZE`.
+
+    Raises:
+        ValueError: ``size`` below 1.
+    """
+    if size < 1:
+        raise ValueError(f"the model cache keeps at least one model, got {size=}")
+    global _load_cached
+    _load_cached = lru_cache(maxsize=size)(_load_uncached)
+
+
+def _load_uncached(text: bytes, name: str, fmt: str, contacts_json: str | None) -> RobotModel:
     contacts = (
         None
         if contacts_json is None
@@ -330,7 +387,7 @@ def _load_cached(text: bytes, name: str, fmt: str, contacts_json: str | None) ->
         path = Path(tmp) / f"model.{'urdf' if fmt == 'urdf' else 'xml'}"
         path.write_bytes(text)
         os.chmod(path, 0o600)
-        model = _build_pinocchio(path, fmt)
+        model = _build_pinocchio(path, fmt, name)
     # The wire's base position is the root body's world position (as MuJoCo's
     # free-joint qpos). Pinocchio keeps an MJCF root body's position in the
     # reference configuration "qpos0", a URDF root offset (if any) in the
@@ -373,3 +430,6 @@ def _load_cached(text: bytes, name: str, fmt: str, contacts_json: str | None) ->
             info.name: swing_limits.get(info.name, np.pi) for info in joints if info.kind == "ball"
         },
     )
+
+
+_load_cached = lru_cache(maxsize=DEFAULT_MODEL_CACHE_SIZE)(_load_uncached)

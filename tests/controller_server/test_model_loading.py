@@ -80,8 +80,9 @@ def mujoco_torque_limits_in_wire_order(robot: RobotModel, mj: mujoco.MjModel) ->
 
 
 @pytest.mark.parametrize("name", MODEL_NAMES)
-def test_text_path_and_name_give_the_same_model(name: str) -> None:
+def test_text_path_and_name_give_the_same_model(name: str, allow_model_dir) -> None:
     path = BUILTIN_MODELS[name]
+    allow_model_dir(path.parent)
     by_name = load_robot_model(name)
     by_path = load_robot_model(str(path))
     by_text = load_robot_model(model_text=path.read_text(encoding="utf-8"))
@@ -199,13 +200,13 @@ def test_urdf_without_contacts_is_refused() -> None:
     assert error.value.field == "contacts"
 
 
-def test_unknown_path_is_model_not_found(tmp_path) -> None:
-    missing = tmp_path / "no_such_robot.xml"
+def test_unknown_path_is_model_not_found(tmp_path, allow_model_dir) -> None:
+    allow_model_dir(tmp_path)
     with pytest.raises(ModelError) as error:
-        load_robot_model(str(missing))
+        load_robot_model("no_such_robot.xml")
     assert error.value.code == ErrorCode.MODEL_NOT_FOUND
     assert error.value.field == "model"
-    assert str(missing) in error.value.detail
+    assert "'no_such_robot.xml'" in error.value.detail
 
 
 @pytest.mark.parametrize("model_format", ["mjcf", "urdf"])

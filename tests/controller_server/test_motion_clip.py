@@ -354,7 +354,8 @@ def test_builtin_clip_loads_by_name(thesis):
     assert (CLIPS_DIR / "stand_sway.json").is_file()
 
 
-def test_clip_loads_by_path_and_round_trips(tmp_path, revolute, knee_clip):
+def test_clip_loads_by_path_and_round_trips(tmp_path, allow_model_dir, revolute, knee_clip):
+    allow_model_dir(tmp_path)
     orientation = np.tile(quaternion_xyzw(pin.exp3(np.array([0.0, 0.1, 0.0]))), (3, 1))
     rows = knee_clip.configurations[:3, 7:]
     clip = MotionClip.from_frames(revolute, [0.0, 0.1, 0.25], rows, orientation, name="tilted")
@@ -458,7 +459,8 @@ MUTATIONS = {
 
 
 @pytest.mark.parametrize("mutation", MUTATIONS)
-def test_invalid_clip_raises_invalid_params(tmp_path, thesis, mutation):
+def test_invalid_clip_raises_invalid_params(tmp_path, allow_model_dir, thesis, mutation):
+    allow_model_dir(tmp_path)
     document = valid_document(thesis)
     MUTATIONS[mutation](document)
     path = tmp_path / "clip.json"
@@ -468,7 +470,8 @@ def test_invalid_clip_raises_invalid_params(tmp_path, thesis, mutation):
     assert info.value.field == "params.clip"
 
 
-def test_valid_document_loads(tmp_path, thesis):
+def test_valid_document_loads(tmp_path, allow_model_dir, thesis):
+    allow_model_dir(tmp_path)
     path = tmp_path / "clip.json"
     path.write_text(json.dumps(valid_document(thesis)))
     assert load_motion_clip(path, thesis).num_frames == 3
@@ -477,7 +480,8 @@ def test_valid_document_loads(tmp_path, thesis):
 @pytest.mark.parametrize(
     "text", ["", "{not json", "[1, 2, 3]", "\xff\xfe"], ids=["empty", "broken", "list", "bytes"]
 )
-def test_bad_json_raises_invalid_params(tmp_path, thesis, text):
+def test_bad_json_raises_invalid_params(tmp_path, allow_model_dir, thesis, text):
+    allow_model_dir(tmp_path)
     path = tmp_path / "clip.json"
     path.write_bytes(text.encode("latin-1"))
     with pytest.raises(InvalidParams) as info:

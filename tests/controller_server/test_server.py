@@ -1,10 +1,10 @@
-"""The server's request handling, without sockets: every bad input gets a typed error."""
+"""A worker's request handling, without sockets: every bad input gets a typed error."""
 
 import msgpack
 import numpy as np
 import pytest
 
-from controller_server.server import ControllerServer
+from controller_server.session_table import SessionTable
 from protocol import ErrorCode, decode, encode
 from protocol.messages import Bye, Command, Error, Hello, Params, SetParams, Stats, Welcome
 from tests.helpers import random_state
@@ -14,9 +14,7 @@ ALICE, BOB = b"alice", b"bob"
 
 @pytest.fixture
 def server():
-    instance = ControllerServer(["tcp://127.0.0.1:*"], session_timeout_s=5.0)
-    yield instance
-    instance.close()
+    return SessionTable()
 
 
 def ask(server, identity, message):
@@ -52,7 +50,7 @@ def test_state_before_hello_is_no_session(server):
     ("fields", "code", "field"),
     [
         ({"model": "no_such_robot"}, ErrorCode.MODEL_NOT_FOUND, "model"),
-        ({"model": "/etc/hostname"}, ErrorCode.MODEL_INVALID, "model"),
+        ({"model": "/etc/hostname"}, ErrorCode.MODEL_NOT_FOUND, "model"),
         ({"model": None, "model_text": "<mujoco><worldbody>"}, ErrorCode.MODEL_INVALID, "model"),
         ({"controller": "magic"}, ErrorCode.UNKNOWN_CONTROLLER, "controller"),
         ({"expected_model_hash": "0" * 64}, ErrorCode.MODEL_MISMATCH, "expected_model_hash"),
@@ -143,9 +141,7 @@ def test_stats_bye_and_expiry(server):
     assert ticks == {"thesis_humanoid": 1, "dino_biped": 0}
     assert isinstance(ask(server, BOB, Bye(seq=4)), Bye)
     assert_error(ask(server, BOB, Bye(seq=5)), ErrorCode.NO_SESSION)
-    session = server.sessions[ALICE]
-    assert server.expire_sessions(session.last_seen_s + 1.0) == []
-    assert server.expire_sessions(session.last_seen_s + 6.0) == [session.session_id]
+    assert server.drop([BOB, ALICE]) == 1
     assert_error(
         ask(server, ALICE, random_state(welcome, np.random.default_rng(2))), ErrorCode.NO_SESSION
     )

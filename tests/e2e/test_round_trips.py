@@ -1,5 +1,6 @@
 """End to end: a real `poise serve` process, 1,000 round trips per model."""
 
+import contextlib
 import shutil
 import signal
 
@@ -19,6 +20,8 @@ ROUND_TRIPS = 1000
 @pytest.mark.parametrize("which", [*BUILTIN_MODELS, "by_path", "by_text", "momentum"])
 def test_thousand_round_trips_are_dynamically_consistent(server, which, tmp_path):
     controller = "tracking"
+    endpoint = server.endpoint
+    stack = contextlib.ExitStack()
     if which == "momentum":  # the full controller, every objective on
         path = BUILTIN_MODELS["thesis_humanoid"]
         hello = {"model": "thesis_humanoid", "params": {"angular_momentum_gain": 50.0}}
@@ -26,7 +29,9 @@ def test_thousand_round_trips_are_dynamically_consistent(server, which, tmp_path
     elif which == "by_path":
         path = tmp_path / "my_dino.xml"
         shutil.copy(BUILTIN_MODELS["dino_biped"], path)
-        hello = {"model": str(path)}
+        hello = {"model": "my_dino.xml"}  # relative to the server's model directory
+        own = ServerProcess(extra_args=["--model-dir", str(tmp_path)])
+        endpoint = stack.enter_context(own).endpoint
     elif which == "by_text":
         path = BUILTIN_MODELS["revolute_humanoid"]
         hello = {"model_text": path.read_text()}
@@ -34,7 +39,7 @@ def test_thousand_round_trips_are_dynamically_consistent(server, which, tmp_path
         path = BUILTIN_MODELS[which]
         hello = {"model": which}
     rng = np.random.default_rng(7)
-    with ControllerClient(server.endpoint, timeout_s=10.0) as client:
+    with stack, ControllerClient(endpoint, timeout_s=10.0) as client:
         welcome = client.connect(**hello, controller=controller)
         checker = IndependentDynamics(str(path), welcome)
         limits = np.concatenate([j.torque_limit for j in welcome.joints])

@@ -1,0 +1,112 @@
+"""What ``poise serve`` is told: endpoints, workers, deadlines, caps, files, keys.
+
+One frozen record, built by the CLI (or by code), handed to the broker and,
+as JSON, to every worker process.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+
+from protocol.codec import MAX_MESSAGE_BYTES
+
+__all__ = ["SINGLE_THREADED_BLAS", "ServeConfig"]
+
+SINGLE_THREADED_BLAS = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "BLIS_NUM_THREADS": "1",
+    "VECLIB_MAXIMUM_THREADS": "1",
+    "NUMEXPR_NUM_THREADS": "1",
+}
+"""Environment of worker processes: linear algebra on one thread each.
+
+numpy's multithreaded BLAS made one 38 × 102 SVD take 321 ms instead of
+0.85 ms on a shared 2-core machine; the workers are the parallelism.
+"""
+
+
+@dataclass(frozen=True)
+class ServeConfig:
+    """Options of one server (``poise serve --help`` documents each).
+
+    Attributes:
+        endpoints: ZeroMQ endpoints the clients connect to.
+        workers: Worker processes; each session lives in one of them.
+        session_timeout_s: Idle time after which a session expires.
+        deadline_s: Time from receipt within which a ``state``, ``set_params``
+            or ``bye`` is answered; later, the client gets ``DEADLINE_EXCEEDED``.
+        hello_deadline_s: The same for ``hello`` (model load, controller creation).
+        recycle_after_s: A worker still busy with one request this long past its
+            deadline is killed and replaced (its sessions are lost).
+        max_sessions: Sessions on the server.
+        max_sessions_per_client: Sessions per client: per CURVE key, or per
+            peer address without CURVE.
+        max_in_flight: Requests of one session forwarded and not yet answered
+            by its worker; more are refused (a flooding client).
+        max_message_bytes: Largest request answered; larger ones get
+            ``LIMIT_EXCEEDED`` up to twice this size, beyond which ZeroMQ drops
+            the connection.
+        max_model_bytes: Largest ``hello.model_text`` and model or clip file.
+        model_cache_entries: Parsed models each worker keeps (least recently used out).
+        model_dirs: Directories whose files a client may name as model or clip.
+        curve_secret_key: Server certificate (``poise keygen``) for CurveZMQ;
+            ``None``: plain TCP, for loopback only.
+        allow_client_keys: Directory of client public keys allowed with CURVE;
+            ``None``: any client key (encryption without authentication).
+        stats_all: ``stats`` lists every session, not only the client's own.
+        log_level: Logging level of the workers.
+    """
+
+    endpoints: tuple[str, ...] = ("tcp://127.0.0.1:5555",)
+    workers: int = 2
+    session_timeout_s: float = 30.0
+    deadline_s: float = 0.5
+    hello_deadline_s: float = 10.0
+    recycle_after_s: float = 5.0
+    max_sessions: int = 128
+    max_sessions_per_client: int = 32
+    max_in_flight: int = 2
+    max_message_bytes: int = MAX_MESSAGE_BYTES
+    max_model_bytes: int = 4 * 1024 * 1024
+    model_cache_entries: int = 16
+    model_dirs: tuple[str, ...] = ()
+    curve_secret_key: str | None = None
+    allow_client_keys: str | None = None
+    stats_all: bool = False
+    log_level: str = "INFO"
+
+    def __post_init__(self) -> None:
+        positive = {
+            "workers": self.workers,
+            "session_timeout_s": self.session_timeout_s,
+            "deadline_s": self.deadline_s,
+            "hello_deadline_s": self.hello_deadline_s,
+            "recycle_after_s": self.recycle_after_s,
+            "max_sessions": self.max_sessions,
+            "max_sessions_per_client": self.max_sessions_per_client,
+            "max_in_flight": self.max_in_flight,
+            "max_message_bytes": self.max_message_bytes,
+            "max_model_bytes": self.max_model_bytes,
+            "model_cache_entries": self.model_cache_entries,
+        }
+        for name, value in positive.items():
+            if not value > 0 or value != value or value == float("inf"):
+                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        if not self.endpoints:
+            raise ValueError("give at least one endpoint to bind")
+
+    def to_json(self) -> str:
+        """The record as JSON (for a worker's command line)."""
+        return json.dumps(dataclasses.asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> ServeConfig:
+        """Inverse of :meth:`to_json`."""
+        fields = json.loads(text)
+        fields["endpoints"] = tuple(fields["endpoints"])
+        fields["model_dirs"] = tuple(fields["model_dirs"])
+        return cls(**fields)
