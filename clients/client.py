@@ -6,16 +6,35 @@ request that timed out) is dropped. A request that gets no answer within
 ``timeout_s`` raises :class:`ServerTimeout` (a :class:`TimeoutError`); the
 next request then reconnects on a fresh socket and repeats the handshake,
 so a client survives a server restart.
+
+The repeated handshake restores every parameter in force: the ``hello``
+parameters with every change the server accepted through
+:meth:`ControllerClient.set_params` merged in (a ``None`` value, which removes
+e.g. a ``point:<name>`` target, drops the key). A session the server let
+expire (idle longer than ``poise serve --session-timeout``) answers ``state``
+and ``set_params`` with ``NO_SESSION``; the client then re-creates it the same
+way, once, logs a warning on the ``poise.client`` logger and repeats the
+request.
+
+With :class:`CurveKeys` the connection is encrypted and authenticated with
+ZeroMQ's CURVE mechanism; a server that refuses the client's key does not
+answer at all, so that shows as a :class:`ServerTimeout`.
 """
 
 from __future__ import annotations
 
+import logging
+import os
 import time
 from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
 from types import TracebackType
 from typing import Any
 
 import zmq
+import zmq.auth
+from zmq.utils import z85
 
 from protocol.codec import decode, encode
 from protocol.errors import ErrorCode, PoiseError, ProtocolError
@@ -34,7 +53,18 @@ from protocol.messages import (
     Welcome,
 )
 
-__all__ = ["ControllerClient", "ServerError", "ServerTimeout"]
+__all__ = [
+    "ControllerClient",
+    "CurveKeys",
+    "InvalidKeyFile",
+    "ServerError",
+    "ServerTimeout",
+]
+
+log = logging.getLogger("poise.client")
+
+CURVE_KEY_LENGTH = 40
+"""Length of a Z85-encoded CURVE key (32 bytes of key material)."""
 
 
 class ServerTimeout(PoiseError, TimeoutError):
@@ -45,12 +75,131 @@ class ServerError(ProtocolError):
     """The server answered a request with an ``error`` message."""
 
 
+class InvalidKeyFile(PoiseError, ValueError):
+    """A CURVE key file is missing, unreadable or holds no usable key.
+
+    Attributes:
+        path: The key file.
+        detail: What is wrong with it and what to do.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], detail: str):
+        self.path = Path(path)
+        self.detail = detail
+        super().__init__(f"CURVE key file {str(path)!r}: {detail}")
+
+
+@dataclass(frozen=True)
+class CurveKeys:
+    """The keys of an encrypted, authenticated (ZeroMQ CURVE) connection.
+
+    Keys are 40-byte Z85 strings, as made by :func:`zmq.curve_keypair` and
+    stored by :func:`zmq.auth.create_certificates`.
+
+    Attributes:
+        server_public: The server's public key (the client checks it is
+            talking to that server).
+        client_public: This client's public key (the server's allow list
+            holds it).
+        client_secret: This client's secret key (never sent).
+
+    Raises:
+        ValueError: A key is not 40 Z85 characters, or the client's public
+            key does not belong to its secret key.
+    """
+
+    server_public: bytes
+    client_public: bytes
+    client_secret: bytes = field(repr=False)
+
+    def __post_init__(self) -> None:
+        for name in ("server_public", "client_public", "client_secret"):
+            problem = _key_problem(getattr(self, name))
+            if problem:
+                raise ValueError(f"{name}: {problem}")
+        if zmq.curve_public(self.client_secret) != self.client_public:
+            raise ValueError("client_public is not the public key of client_secret")
+
+    @classmethod
+    def from_files(
+        cls,
+        server_key: str | os.PathLike[str],
+        client_key: str | os.PathLike[str] | None = None,
+    ) -> CurveKeys:
+        """Load keys from certificate files made by :func:`zmq.auth.create_certificates`.
+
+        Args:
+            server_key: The server's public certificate (``NAME.key``; a
+                ``NAME.key_secret`` file works too, only its public key is read).
+            client_key: This client's secret certificate (``NAME.key_secret``).
+                ``None`` makes an ephemeral key pair: enough when the server
+                accepts any client key (encryption without client
+                authentication).
+
+        Raises:
+            InvalidKeyFile: A file is missing, unreadable, holds no valid
+                public key, or (``client_key``) no matching secret key.
+        """
+        server_public, _ = _load_key_file(server_key)
+        if client_key is None:
+            client_public, client_secret = zmq.curve_keypair()
+        else:
+            client_public, secret = _load_key_file(client_key)
+            if secret is None:
+                raise InvalidKeyFile(
+                    client_key,
+                    "holds no secret key; give the client's `.key_secret` file, not `.key`",
+                )
+            problem = _key_problem(secret)
+            if problem:
+                raise InvalidKeyFile(client_key, f"secret key: {problem}")
+            if zmq.curve_public(secret) != client_public:
+                raise InvalidKeyFile(client_key, "the public key does not match the secret key")
+            client_secret = secret
+        return cls(server_public, client_public, client_secret)
+
+
+def _key_problem(key: bytes) -> str:
+    """Why ``key`` is not a Z85 CURVE key, or ``""`` if it is one."""
+    if not isinstance(key, bytes) or len(key) != CURVE_KEY_LENGTH:
+        length = len(key) if isinstance(key, bytes) else type(key).__name__
+        return f"expected {CURVE_KEY_LENGTH} Z85 bytes, got {length}"
+    try:
+        z85.decode(key)
+    except (KeyError, ValueError):
+        return "not a Z85 string"
+    return ""
+
+
+def _load_key_file(path: str | os.PathLike[str]) -> tuple[bytes, bytes | None]:
+    """Public and (if present) secret key of a certificate file."""
+    if not os.path.exists(path):
+        raise InvalidKeyFile(path, "no such file; make one with zmq.auth.create_certificates")
+    if not os.path.isfile(path):
+        raise InvalidKeyFile(path, "not a regular file; give the key file, not its directory")
+    try:
+        public, secret = zmq.auth.load_certificate(path)
+    except OSError as exc:
+        raise InvalidKeyFile(path, f"cannot read it ({exc.strerror or exc})") from exc
+    except ValueError as exc:
+        raise InvalidKeyFile(path, "no `public-key` line; is it a zmq.auth certificate?") from exc
+    problem = _key_problem(public)
+    if problem:
+        raise InvalidKeyFile(path, f"public key: {problem}")
+    return public, secret
+
+
 class ControllerClient:
     """Blocking request/reply client for one robot session.
 
     Args:
         endpoint: Server endpoint, e.g. ``tcp://127.0.0.1:5555``.
         timeout_s: Time to wait for each reply.
+        curve: Keys to encrypt and authenticate the connection (ZeroMQ
+            CURVE); ``None`` for a plain connection.
+
+    Raises:
+        PoiseError: ``curve`` is given but this libzmq lacks CURVE support.
 
     Example:
         >>> with ControllerClient("tcp://127.0.0.1:5555") as client:  # doctest: +SKIP
@@ -58,15 +207,22 @@ class ControllerClient:
         ...     command = client.step(state)
     """
 
-    def __init__(self, endpoint: str, timeout_s: float = 1.0):
+    def __init__(self, endpoint: str, timeout_s: float = 1.0, *, curve: CurveKeys | None = None):
+        if curve is not None and not zmq.has("curve"):
+            raise PoiseError(
+                f"libzmq {zmq.zmq_version()} was built without CURVE; "
+                "install the pyzmq wheel, which bundles libsodium"
+            )
         self.endpoint = endpoint
         self.timeout_s = timeout_s
+        self.curve = curve
         self.welcome: Welcome | None = None
         self._context = zmq.Context()
         self._socket: zmq.Socket | None = None
         self._hello: Hello | None = None
         self._seq = 0
         self._pending_seq: int | None = None
+        self._pending_state: State | None = None
         self._needs_reconnect = False
 
     def __enter__(self) -> ControllerClient:
@@ -118,7 +274,15 @@ class ControllerClient:
         return self._seq
 
     def step(self, state: State) -> Command:
-        """Send one state and return the command for it (``seq`` is set here)."""
+        """Send one state and return the command for it (``seq`` is set here).
+
+        An expired session is re-created once and the state sent again (see
+        the module docstring).
+
+        Raises:
+            ServerError: The server answered with an ``error``.
+            ServerTimeout: No answer within ``timeout_s``.
+        """
         return self._request(state, Command)
 
     def send_state(self, state: State) -> None:
@@ -133,29 +297,52 @@ class ControllerClient:
         if self._needs_reconnect:
             self.reconnect()
         self._pending_seq = self._post(state)
+        self._pending_state = state
 
     def receive_command(self) -> Command:
         """Wait for the reply to the state sent by :meth:`send_state`.
+
+        If the session expired, it is re-created once and the state sent
+        again; the ``hello`` and the repeated state may each take up to
+        ``timeout_s`` more.
 
         Raises:
             ServerError: The server answered with an ``error``.
             ServerTimeout: No answer within ``timeout_s`` of this call.
         """
         seq, self._pending_seq = self._pending_seq, None
-        if seq is None:
+        state, self._pending_state = self._pending_state, None
+        if seq is None or state is None:
             raise PoiseError("send_state() before receive_command()")
-        return self._await(seq, "state", Command, self.timeout_s)
+        try:
+            return self._await(seq, "state", Command, self.timeout_s)
+        except ServerError as exc:
+            if not self._session_expired(exc):
+                raise
+        self._recreate_session()
+        return self._send(state, Command, self.timeout_s)
 
     def set_params(self, params: Mapping[str, Any]) -> dict[str, Any]:
-        """Change controller parameters; returns every parameter in force."""
-        return self._request(SetParams(params=dict(params)), Params).params
+        """Change controller parameters; returns every parameter in force.
+
+        Once the server accepts the change, it is also remembered for the
+        handshake that restores the session after a reconnect.
+
+        Raises:
+            ServerError: The server refused a parameter (nothing changed).
+            ServerTimeout: No answer within ``timeout_s``.
+        """
+        request = SetParams(params=dict(params))
+        reply = self._request(request, Params)
+        self._remember_params(request.params)
+        return reply.params
 
     def stats(self) -> list[SessionStats]:
         """Per-session statistics of the server."""
         return self._request(Stats(), Stats).sessions or []
 
     def reconnect(self) -> Welcome:
-        """Open a fresh socket and repeat the handshake."""
+        """Open a fresh socket and repeat the handshake (with the parameters in force)."""
         self._close_socket()
         return self._handshake()
 
@@ -176,22 +363,58 @@ class ControllerClient:
         self.welcome = self._send(self._hello, Welcome, self.timeout_s)
         return self.welcome
 
+    def _remember_params(self, changes: Mapping[str, Any]) -> None:
+        """Merge accepted changes into the ``hello`` that a reconnect repeats.
+
+        ``None`` removes (a ``point:<name>`` target; the server refuses it
+        for other parameters), so the key is dropped rather than sent.
+        """
+        if self._hello is None:
+            return
+        merged = {**self._hello.params, **changes}
+        params = {key: value for key, value in merged.items() if value is not None}
+        self._hello = self._hello.model_copy(update={"params": params})
+
+    def _session_expired(self, error: ServerError) -> bool:
+        return error.code == ErrorCode.NO_SESSION and self._hello is not None
+
+    def _recreate_session(self) -> None:
+        expired = self.welcome.session_id[:8] if self.welcome is not None else "?"
+        welcome = self._handshake()
+        log.warning(
+            "session %s on %s expired on the server; re-created it as session %s",
+            expired,
+            self.endpoint,
+            welcome.session_id[:8],
+        )
+
     def _request(self, message: Message, reply_type: type[Any]) -> Any:
         if self._pending_seq is not None:
             raise PoiseError("receive_command() the outstanding state's reply first")
         if self._needs_reconnect:
             self.reconnect()
+        try:
+            return self._send(message, reply_type, self.timeout_s)
+        except ServerError as exc:
+            if not (isinstance(message, State | SetParams) and self._session_expired(exc)):
+                raise
+        self._recreate_session()
         return self._send(message, reply_type, self.timeout_s)
 
     def _open_socket(self) -> zmq.Socket:
         if self._socket is None:
             self._socket = self._context.socket(zmq.DEALER)
             self._socket.setsockopt(zmq.LINGER, 0)
+            if self.curve is not None:
+                self._socket.curve_serverkey = self.curve.server_public
+                self._socket.curve_publickey = self.curve.client_public
+                self._socket.curve_secretkey = self.curve.client_secret
             self._socket.connect(self.endpoint)
         return self._socket
 
     def _close_socket(self) -> None:
         self._pending_seq = None
+        self._pending_state = None
         if self._socket is not None:
             self._socket.close(linger=0)
             self._socket = None
@@ -224,7 +447,9 @@ class ControllerClient:
                 )
             return reply
         self._needs_reconnect = True
+        check = "check that `poise serve` is running there"
+        if self.curve is not None:
+            check += ", has the server key given and accepts this client's CURVE key"
         raise ServerTimeout(
-            f"no reply to {request_type!r} from {self.endpoint} within {timeout_s:.3g} s; "
-            "check that `poise serve` is running there"
+            f"no reply to {request_type!r} from {self.endpoint} within {timeout_s:.3g} s; {check}"
         )

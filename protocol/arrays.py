@@ -15,15 +15,36 @@ from pydantic import BeforeValidator, PlainSerializer, WithJsonSchema
 from pydantic_core import PydanticCustomError
 
 __all__ = [
+    "MAX_ABS_JOINT_POSITION",
+    "MAX_ABS_POSITION_M",
+    "MAX_ABS_TIME_S",
+    "MAX_ABS_VELOCITY",
+    "MAX_ABS_WRENCH",
     "FiniteArray",
     "FloatArray",
+    "JointPositionArray",
+    "Position3",
     "QuaternionXYZW",
     "Vector3",
+    "Velocity3",
+    "VelocityArray",
+    "WrenchArray",
     "array_to_bytes",
     "bounded_array",
 ]
 
 WIRE_DTYPE = np.dtype("<f8")
+
+MAX_ABS_POSITION_M = 1e4
+"""Largest base position coordinate a ``state`` may carry (m)."""
+MAX_ABS_JOINT_POSITION = 1e3
+"""Largest joint position (rad, or m for prismatic joints): multi-turn joints fit."""
+MAX_ABS_VELOCITY = 1e3
+"""Largest velocity entry (rad/s and m/s): about 10⁴ rpm, beyond any actuator."""
+MAX_ABS_WRENCH = 1e6
+"""Largest measured contact force or torque entry (N, N·m)."""
+MAX_ABS_TIME_S = 1e12
+"""Largest client time (s); Unix time fits."""
 
 
 def array_to_bytes(array: np.ndarray) -> bytes:
@@ -116,3 +137,10 @@ Vector3 = _array_type(3, finite=True)
 """Three finite float64 values."""
 QuaternionXYZW = _array_type(4, finite=True)
 """Unit quaternion, scalar last ``[x, y, z, w]`` (normalised by the server)."""
+
+# Request arrays with the magnitudes of the wire contract (docs/protocol.md).
+JointPositionArray = bounded_array(MAX_ABS_JOINT_POSITION)
+VelocityArray = bounded_array(MAX_ABS_VELOCITY)
+Velocity3 = bounded_array(MAX_ABS_VELOCITY, 3)
+Position3 = bounded_array(MAX_ABS_POSITION_M, 3)
+WrenchArray = bounded_array(MAX_ABS_WRENCH)

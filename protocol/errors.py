@@ -40,13 +40,19 @@ class ErrorCode(IntEnum):
     INVALID_PARAMS = 12, "A controller parameter is unknown or its value is out of range."
     UNEXPECTED_MESSAGE = 13, "A reply-only message (`welcome`, `command`, …) was sent as a request."
     INTERNAL = 14, "The controller failed on a valid request; the session is kept."
-    DEADLINE_EXCEEDED = 15, (
-        "The request was not served within the server's deadline (`poise serve --deadline`); "
-        "nothing was computed for it that could reach an actuator."
+    DEADLINE_EXCEEDED = (
+        15,
+        (
+            "The request was not served within the server's deadline (`poise serve --deadline`); "
+            "nothing was computed for it that could reach an actuator."
+        ),
     )
-    LIMIT_EXCEEDED = 16, (
-        "A server cap was hit (sessions per server or client, message size, model size or "
-        "load time); the detail names the cap and its value."
+    LIMIT_EXCEEDED = (
+        16,
+        (
+            "A server cap was hit (sessions per server or client, message size, model size or "
+            "load time); the detail names the cap and its value."
+        ),
     )
 
 

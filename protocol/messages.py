@@ -14,7 +14,21 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from protocol.arrays import FloatArray, QuaternionXYZW, Vector3, bounded_array
+from protocol.arrays import (
+    MAX_ABS_JOINT_POSITION,
+    MAX_ABS_POSITION_M,
+    MAX_ABS_TIME_S,
+    MAX_ABS_VELOCITY,
+    MAX_ABS_WRENCH,
+    FloatArray,
+    JointPositionArray,
+    Position3,
+    QuaternionXYZW,
+    Vector3,
+    Velocity3,
+    VelocityArray,
+    WrenchArray,
+)
 from protocol.errors import ErrorCode
 
 __all__ = [
@@ -45,23 +59,6 @@ __all__ = [
 
 PROTOCOL_VERSION = 1
 """Version of this wire contract; a message with another version is refused."""
-
-MAX_ABS_POSITION_M = 1e4
-"""Largest base position coordinate a ``state`` may carry (m)."""
-MAX_ABS_JOINT_POSITION = 1e3
-"""Largest joint position (rad, or m for prismatic joints): multi-turn joints fit."""
-MAX_ABS_VELOCITY = 1e3
-"""Largest velocity entry (rad/s and m/s): about 10⁴ rpm, beyond any actuator."""
-MAX_ABS_WRENCH = 1e6
-"""Largest measured contact force or torque entry (N, N·m)."""
-MAX_ABS_TIME_S = 1e12
-"""Largest client time (s); Unix time fits."""
-
-JointPositionArray = bounded_array(MAX_ABS_JOINT_POSITION)
-VelocityArray = bounded_array(MAX_ABS_VELOCITY)
-Velocity3 = bounded_array(MAX_ABS_VELOCITY, 3)
-Position3 = bounded_array(MAX_ABS_POSITION_M, 3)
-WrenchArray = bounded_array(MAX_ABS_WRENCH)
 
 ParamValue = float | int | bool | str | list[float] | dict[str, float | str | list[float]] | None
 """A controller parameter: a number, flag, name, vector, a small record

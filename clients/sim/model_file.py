@@ -12,6 +12,7 @@ from __future__ import annotations
 import importlib.util
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Any
 
 from clients.sim.backend import ContactPoint
 
@@ -35,7 +36,7 @@ def resolve_model_path(model: str) -> Path:
     return path if path.suffix and path.is_file() else builtin_model_path(model)
 
 
-def hello_model(model: str) -> dict[str, str]:
+def hello_model(model: str) -> dict[str, Any]:
     """The ``hello`` fields naming ``model``: a built-in by name, a file by its text.
 
     A server reads files only from its own model directories, and may run on
