@@ -94,7 +94,7 @@ class CurveKeys:
     """The keys of an encrypted, authenticated (ZeroMQ CURVE) connection.
 
     Keys are 40-byte Z85 strings, as made by :func:`zmq.curve_keypair` and
-    stored by :func:`zmq.auth.create_certificates`.
+    stored by `poise keygen` (:func:`zmq.auth.create_certificates`).
 
     Attributes:
         server_public: The server's public key (the client checks it is
@@ -174,7 +174,7 @@ def _key_problem(key: bytes) -> str:
 def _load_key_file(path: str | os.PathLike[str]) -> tuple[bytes, bytes | None]:
     """Public and (if present) secret key of a certificate file."""
     if not os.path.exists(path):
-        raise InvalidKeyFile(path, "no such file; make one with zmq.auth.create_certificates")
+        raise InvalidKeyFile(path, "no such file; make one with `poise keygen DIR`")
     if not os.path.isfile(path):
         raise InvalidKeyFile(path, "not a regular file; give the key file, not its directory")
     try:
@@ -405,6 +405,8 @@ class ControllerClient:
         if self._socket is None:
             self._socket = self._context.socket(zmq.DEALER)
             self._socket.setsockopt(zmq.LINGER, 0)
+            # A random routing id: another peer cannot guess it to reach this session.
+            self._socket.setsockopt(zmq.ROUTING_ID, b"c" + os.urandom(15))
             if self.curve is not None:
                 self._socket.curve_serverkey = self.curve.server_public
                 self._socket.curve_publickey = self.curve.client_public

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from clients.client import CurveKeys
 from clients.sim.app import run_scenarios
 
 __all__ = ["DEMO_SCENARIOS", "run_demo"]
@@ -25,6 +26,7 @@ def run_demo(
     endpoint: str | None = None,
     backend: str = "reference",
     controller: str = "momentum",
+    curve: CurveKeys | None = None,
 ) -> int:
     """Run the push scenarios; exit code 0 if the robot stayed up in all of them, else 1."""
     if endpoint is None:
@@ -34,6 +36,7 @@ def run_demo(
         output_dir,
         endpoint,
         overrides={"backend": backend, "controller": controller},
+        curve=curve,
     )
     print(f"report: {output_dir / 'report.json'}; plots: {', '.join(r['plot'] for r in reports)}")
     return 1 if any(r["fell"] for r in reports) else 0

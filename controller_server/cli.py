@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from clients.client import CurveKeys
     from controller_server.config import ServeConfig
 
 __all__ = ["build_parser", "main"]
@@ -26,6 +27,10 @@ READY_PREFIX = "poise serve: listening on "
 CONTROLLER_NAMES = ["momentum", "prioritized", "tracking"]
 """Controllers a client may pick: the keys of `controller_server.controllers.CONTROLLERS`,
 listed here so that the CLI starts without importing them (a test keeps the two equal)."""
+
+
+class UsageError(Exception):
+    """A user's mistake on the command line: printed as one line, exit code 2."""
 
 
 def _serve_config(args: argparse.Namespace) -> ServeConfig:
@@ -112,10 +117,26 @@ def _keygen(args: argparse.Namespace) -> int:
     return 0
 
 
+def _curve_keys(args: argparse.Namespace) -> CurveKeys | None:
+    """The client's CURVE keys from ``--server-key``/``--client-key``, if given."""
+    from clients.client import CurveKeys
+
+    if args.server_key is None:
+        if args.client_key is not None:
+            raise UsageError("--client-key needs --server-key (the server's public key file)")
+        return None
+    try:
+        return CurveKeys.from_files(args.server_key, args.client_key)
+    except ValueError as exc:  # InvalidKeyFile: one line naming the file
+        raise UsageError(str(exc)) from None
+
+
 def _demo(args: argparse.Namespace) -> int:
     from clients.demo import run_demo
 
-    return run_demo(Path(args.output), args.connect, args.backend, args.controller)
+    return run_demo(
+        Path(args.output), args.connect, args.backend, args.controller, curve=_curve_keys(args)
+    )
 
 
 def _sim(args: argparse.Namespace) -> int:
@@ -127,8 +148,9 @@ def _sim(args: argparse.Namespace) -> int:
         overrides["backend"] = args.backend
     if args.controller:
         overrides["controller"] = args.controller
+    curve = _curve_keys(args)
     if not args.sweep_push:
-        run_scenarios(args.scenarios, Path(args.output), args.connect, overrides)
+        run_scenarios(args.scenarios, Path(args.output), args.connect, overrides, curve=curve)
         return 0
     push = PushSpec(
         body=args.push_body,
@@ -140,8 +162,21 @@ def _sim(args: argparse.Namespace) -> int:
     if args.push_direction:
         directions = {f"({x:g}, {y:g}, {z:g})": (x, y, z) for x, y, z in args.push_direction}
     with server_endpoint(args.connect) as endpoint:
-        sweep_controllers(args.scenarios[0], push, directions, endpoint, overrides)
+        sweep_controllers(args.scenarios[0], push, directions, endpoint, overrides, curve=curve)
     return 0
+
+
+def _add_client_key_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--server-key",
+        metavar="FILE",
+        help="with --connect to a CURVE server: its public key file (NAME.key of `poise keygen`)",
+    )
+    parser.add_argument(
+        "--client-key",
+        metavar="FILE",
+        help="this client's secret key file (NAME.key_secret); default: a throwaway key pair",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -312,6 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sim.add_argument("--push-start", type=float, default=0.5, metavar="SECONDS")
     sim.add_argument("--push-duration", type=float, default=0.1, metavar="SECONDS")
+    _add_client_key_options(sim)
     sim.set_defaults(handler=_sim)
 
     demo = commands.add_parser(
@@ -345,6 +381,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ENDPOINT",
         help="use a running server at ENDPOINT instead of starting one",
     )
+    _add_client_key_options(demo)
     demo.set_defaults(handler=_demo)
     return parser
 
@@ -355,7 +392,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(name)s %(levelname)s %(message)s"
     )
-    return int(args.handler(args))
+    try:
+        return int(args.handler(args))
+    except UsageError as exc:
+        print(f"poise {args.command}: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from clients.client import CurveKeys
 from clients.server_process import ServerProcess
 from clients.sim.metrics import compute_metrics
 from clients.sim.plots import plot_run
@@ -71,6 +72,7 @@ def run_scenarios(
     endpoint: str | None = None,
     overrides: dict[str, Any] | None = None,
     progress: bool = True,
+    curve: CurveKeys | None = None,
 ) -> list[dict[str, Any]]:
     """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table."""
     output_dir.mkdir(parents=True, exist_ok=True)
@@ -80,7 +82,7 @@ def run_scenarios(
         for name in names:
             scenario = load_scenario(name, **(overrides or {}))
             bar = _progress_bar(scenario.name) if progress else None
-            record = run_scenario(scenario, address, progress=bar)
+            record = run_scenario(scenario, address, progress=bar, curve=curve)
             if progress:
                 sys.stderr.write("\r" + " " * 70 + "\r")
             metrics = compute_metrics(record)
@@ -114,6 +116,7 @@ def sweep_push(
     max_force_N: float = 2000.0,
     tolerance_N: float = 5.0,
     settle_s: float = 3.0,
+    curve: CurveKeys | None = None,
 ) -> float:
     """Largest push force (N) the scenario survives, by bisection (thesis ch. 7.1).
 
@@ -131,7 +134,7 @@ def sweep_push(
     def survives(force_N: float) -> bool:
         spec = push.model_copy(update={"force_in_world_N": tuple(force_N * d for d in direction)})
         scenario = base.model_copy(update={"pushes": [spec], "duration_s": duration_s})
-        return not run_scenario(scenario, endpoint).fell
+        return not run_scenario(scenario, endpoint, curve=curve).fell
 
     low, high = 0.0, max_force_N
     if survives(high):
@@ -148,6 +151,7 @@ def sweep_controllers(
     directions: dict[str, tuple[float, float, float]],
     endpoint: str,
     overrides: dict[str, Any] | None = None,
+    curve: CurveKeys | None = None,
 ) -> dict[str, dict[str, float]]:
     """:func:`sweep_push` for each of ``SWEEP_CONTROLLERS`` and each direction; prints a table.
 
@@ -170,7 +174,9 @@ def sweep_controllers(
             }
         )
         results[label] = {
-            name: sweep_push(base, push.model_copy(update={"force_in_world_N": xyz}), endpoint)
+            name: sweep_push(
+                base, push.model_copy(update={"force_in_world_N": xyz}), endpoint, curve=curve
+            )
             for name, xyz in directions.items()
         }
         weakest = min(results[label].values())

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from clients.client import ControllerClient, ServerError
+from clients.client import ControllerClient, CurveKeys, ServerError
 from clients.layout import joint_slices, neutral_joint_position
 from clients.sim.backend import PhysicsBackend, Push
 from clients.sim.model_file import hello_model, resolve_model_path
@@ -163,7 +163,11 @@ def _step_physics(
 
 
 def run_scenario(
-    scenario: Scenario, endpoint: str, progress: Any = None, timeout_s: float = 10.0
+    scenario: Scenario,
+    endpoint: str,
+    progress: Any = None,
+    timeout_s: float = 10.0,
+    curve: CurveKeys | None = None,
 ) -> RunRecord:
     """Simulate ``scenario`` against the server at ``endpoint``.
 
@@ -172,11 +176,12 @@ def run_scenario(
         endpoint: ``poise serve`` endpoint.
         progress: Optional callable ``progress(fraction)`` for a progress bar.
         timeout_s: Per-request timeout.
+        curve: CURVE keys for a server that requires them.
     """
     backend = make_backend(scenario)
     pushes = [push.to_push() for push in scenario.pushes]
     measured = scenario.ground_force_mode == "measured"
-    with ControllerClient(endpoint, timeout_s=timeout_s) as client:
+    with ControllerClient(endpoint, timeout_s=timeout_s, curve=curve) as client:
         welcome = client.connect(
             **hello_model(scenario.model),
             controller=scenario.controller,
