@@ -42,6 +42,7 @@ def _serve_config(args: argparse.Namespace) -> ServeConfig:
         session_timeout_s=args.session_timeout,
         deadline_s=args.deadline,
         hello_deadline_s=args.hello_deadline,
+        recycle_after_s=args.recycle_after,
         max_sessions=args.max_sessions,
         max_sessions_per_client=args.max_sessions_per_client,
         max_in_flight=args.max_in_flight,
@@ -233,6 +234,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=10.0,
         metavar="SECONDS",
         help="the same for hello: model load and controller creation (default: 10)",
+    )
+    serve.add_argument(
+        "--recycle-after",
+        type=float,
+        default=5.0,
+        metavar="SECONDS",
+        help="a worker still busy this long past a request's deadline is killed and replaced, "
+        "losing its sessions (default: 5)",
     )
     serve.add_argument(
         "--max-sessions",

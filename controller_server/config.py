@@ -45,8 +45,9 @@ class ServeConfig:
         max_sessions: Sessions on the server.
         max_sessions_per_client: Sessions per client: per CURVE key, or per
             peer address without CURVE.
-        max_in_flight: Requests of one session forwarded and not yet answered
-            by its worker; more are refused (a flooding client).
+        max_in_flight: Requests of one session not yet answered; more are refused
+            (a flooding client). A request answered ``DEADLINE_EXCEEDED`` no
+            longer counts: its worker skips it if it has not started it.
         max_message_bytes: Largest request answered; larger ones get
             ``LIMIT_EXCEEDED`` up to twice this size, beyond which ZeroMQ drops
             the connection.

@@ -94,6 +94,8 @@ class _Worker:
     """Routing ids of the clients whose sessions live here."""
     pending: dict[bytes, _Pending] = dataclasses.field(default_factory=dict)
     """Forwarded requests by id, in the order sent (and served)."""
+    backlog: list[list[bytes]] = dataclasses.field(default_factory=list)
+    """Messages for it held until it reports ready (a replacement warming up)."""
 
 
 @dataclasses.dataclass
@@ -333,14 +335,10 @@ class ControllerServer:
             if refusal:
                 self._reply(identity, _error(seq, ErrorCode.LIMIT_EXCEEDED, "", refusal))
                 return
-            ready = [w for w in self.workers.values() if w.ready]
-            if not ready:
-                self._reply(
-                    identity,
-                    _error(seq, ErrorCode.LIMIT_EXCEEDED, "", "no worker is ready; retry"),
-                )
-                return
-            worker = min(ready, key=lambda w: (len(w.routes), len(w.pending)))
+            # Ready workers first; a replacement still warming up gets it queued.
+            worker = min(
+                self.workers.values(), key=lambda w: (not w.ready, len(w.routes), len(w.pending))
+            )
             old = self.routes.pop(identity, None)
             if old is not None:  # a different peer's session on this routing id
                 self._drop_route(identity, old)
@@ -398,6 +396,10 @@ class ControllerServer:
         )
 
     def _to_worker(self, frames: list[bytes]) -> None:
+        worker = self.workers.get(frames[0])
+        if worker is not None and not worker.ready:
+            worker.backlog.append(frames)
+            return
         try:
             self._backend.send_multipart(frames, zmq.NOBLOCK)
         except zmq.ZMQError as exc:  # a dead worker: its requests time out, it is replaced
@@ -423,12 +425,12 @@ class ControllerServer:
         if kind == b"ready":
             worker.ready = True
             log.info("worker %s ready", worker.identity.decode())
+            backlog, worker.backlog = worker.backlog, []
+            for message in backlog:
+                self._to_worker(message)
         elif kind in (b"rep", b"late"):
             pending = worker.pending.pop(frames[2], None)
-            if pending is None:
-                return
-            pending.route.in_flight -= 1
-            if kind == b"rep":
+            if pending is not None and kind == b"rep":
                 self._settle(pending, session_open=frames[3] == b"1", reply=frames[4])
         elif kind == b"stats":
             self._collect_stats(worker.identity, frames[2], frames[3])
@@ -438,6 +440,8 @@ class ControllerServer:
         if not session_open and route is pending.route:
             self._unroute(pending.identity, route)
         if not pending.answered:
+            pending.answered = True
+            pending.route.in_flight -= 1
             self._send(pending.identity, reply)
 
     def _enforce_deadlines(self, now: float) -> None:
@@ -463,6 +467,7 @@ class ControllerServer:
     def _answer_late(self, pending: _Pending, detail: str) -> None:
         if not pending.answered:
             pending.answered = True
+            pending.route.in_flight -= 1
             self._reply(
                 pending.identity, _error(pending.seq, ErrorCode.DEADLINE_EXCEEDED, "", detail)
             )
@@ -501,17 +506,23 @@ class ControllerServer:
             self._to_worker([route.worker, b"drop", route.key])
 
     def expire_sessions(self, now_s: float) -> int:
-        """Drop sessions idle longer than the timeout (none in flight); return how many."""
-        expired = [
-            (identity, route)
-            for identity, route in self.routes.items()
-            if route.in_flight == 0 and now_s - route.last_seen_s > self.config.session_timeout_s
-        ]
-        for identity, route in expired:
-            self._drop_route(identity, route)
-        if expired:
-            log.info("%d sessions expired", len(expired))
-        return len(expired)
+        """Drop sessions idle longer than the timeout (none in flight); return how many.
+
+        Each worker gets one ``drop`` with all its expired keys, so it returns
+        their memory in one pass.
+        """
+        expired: dict[bytes, list[bytes]] = {}
+        for identity, route in list(self.routes.items()):
+            if route.in_flight == 0 and now_s - route.last_seen_s > self.config.session_timeout_s:
+                self._unroute(identity, route)
+                expired.setdefault(route.worker, []).append(route.key)
+        for worker, keys in expired.items():
+            if worker in self.workers:
+                self._to_worker([worker, b"drop", *keys])
+        count = sum(map(len, expired.values()))
+        if count:
+            log.info("%d sessions expired", count)
+        return count
 
     def _gather_stats(self, identity: bytes, client: str, payload: bytes) -> None:
         try:
