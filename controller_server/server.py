@@ -40,7 +40,7 @@ import zmq
 
 from controller_server.config import SINGLE_THREADED_BLAS, ServeConfig
 from controller_server.session_table import SessionTable
-from controller_server.worker import DEADLINE
+from controller_server.worker import REPLY_HEADER, REQUEST_HEADER
 from protocol.codec import decode, encode
 from protocol.errors import ErrorCode, ProtocolError
 from protocol.messages import Error, Message, SessionStats, Stats
@@ -50,6 +50,8 @@ __all__ = ["ControllerServer", "ServerStartError"]
 log = logging.getLogger("poise.server")
 
 POLL_INTERVAL_S = 0.05
+WORKER_CHECK_INTERVAL_S = 0.1
+"""How often the broker looks for dead workers (a system call per worker)."""
 EXPIRY_CHECK_INTERVAL_S = 1.0
 DRAIN_S = 1.0
 """After SIGTERM, requests already received are still answered for this long."""
@@ -146,6 +148,7 @@ class ControllerServer:
         self._gathers: dict[bytes, _Gather] = {}
         self._ids = itertools.count(1)
         self._generation = itertools.count()
+        self._next_worker_check_s = 0.0
         self._local = SessionTable()  # answers requests that have no session
         self._context = zmq.Context()
         self._authenticator: Any = None
@@ -384,16 +387,8 @@ class ControllerServer:
         worker.pending[request_id] = _Pending(
             identity, seq, route, now + deadline_s, now + deadline_s + self.config.recycle_after_s
         )
-        self._to_worker(
-            [
-                worker.identity,
-                b"req",
-                request_id,
-                route.key,
-                DEADLINE.pack(now + deadline_s),
-                payload,
-            ]
-        )
+        header = REQUEST_HEADER.pack(request_id, route.key, now + deadline_s)
+        self._to_worker([worker.identity, b"req", header, payload])
 
     def _to_worker(self, frames: list[bytes]) -> None:
         worker = self.workers.get(frames[0])
@@ -428,10 +423,13 @@ class ControllerServer:
             backlog, worker.backlog = worker.backlog, []
             for message in backlog:
                 self._to_worker(message)
-        elif kind in (b"rep", b"late"):
-            pending = worker.pending.pop(frames[2], None)
-            if pending is not None and kind == b"rep":
-                self._settle(pending, session_open=frames[3] == b"1", reply=frames[4])
+        elif kind == b"rep":
+            request_id, session_open = REPLY_HEADER.unpack(frames[2])
+            pending = worker.pending.pop(request_id, None)
+            if pending is not None:
+                self._settle(pending, session_open, reply=frames[3])
+        elif kind == b"late":
+            worker.pending.pop(frames[2], None)
         elif kind == b"stats":
             self._collect_stats(worker.identity, frames[2], frames[3])
 
@@ -456,11 +454,13 @@ class ControllerServer:
             first = next(iter(worker.pending.values()), None)
             if first is not None and now > first.recycle_s:
                 self._recycle(worker)
-            elif worker.process.poll() is not None:
+            elif now > self._next_worker_check_s and worker.process.poll() is not None:
                 log.error(
                     "worker %s died (%s)", worker.identity.decode(), worker.process.returncode
                 )
                 self._recycle(worker)
+        if now > self._next_worker_check_s:
+            self._next_worker_check_s = now + WORKER_CHECK_INTERVAL_S
         for request_id in [rid for rid, g in self._gathers.items() if now > g.deadline_s]:
             self._finish_gather(request_id)
 

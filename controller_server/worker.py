@@ -7,17 +7,17 @@ It connects a DEALER to the broker's backend ROUTER and speaks in frames
 (each list is one multipart message; the broker's ROUTER adds and strips the
 worker's identity):
 
-=====================================================  ===================================
-broker → worker                                        worker → broker
-=====================================================  ===================================
-                                                       ``ready``
-``req``, id, session key, deadline (``<d``), request   ``rep``, id, ``1``/``0`` (session
-                                                       open after it), reply
-                                                       — or ``late``, id (past deadline)
-``drop``, session key, …                               —
-``stats``, id, session key, …                          ``stats``, id, msgpack list
-``stop``                                               (exits)
-=====================================================  ===================================
+========================================================  ================================
+broker → worker                                           worker → broker
+========================================================  ================================
+                                                          ``ready``
+``req``, :data:`REQUEST_HEADER` (id, session key,         ``rep``, :data:`REPLY_HEADER` (id,
+deadline), request                                        session open after it), reply
+                                                          — or ``late``, id (past deadline)
+``drop``, session key, …                                  —
+``stats``, id, session key, …                             ``stats``, id, msgpack list
+``stop``                                                  (exits)
+========================================================  ================================
 
 The worker checks the deadline before it starts a request, so a queue behind
 a slow tick is skipped rather than computed for states nobody waits for.
@@ -41,12 +41,14 @@ from protocol.codec import encode
 from protocol.errors import ErrorCode
 from protocol.messages import Error, Hello
 
-__all__ = ["DEADLINE", "WARM_UP_HELLO", "run_worker"]
+__all__ = ["REPLY_HEADER", "REQUEST_HEADER", "WARM_UP_HELLO", "run_worker"]
 
 log = logging.getLogger("poise.worker")
 
-DEADLINE = struct.Struct("<d")
-"""A request's deadline on ``time.monotonic()`` (system-wide on Linux)."""
+REQUEST_HEADER = struct.Struct("<8s8sd")
+"""Request id, session key, deadline on ``time.monotonic()`` (system-wide on Linux)."""
+REPLY_HEADER = struct.Struct("<8s?")
+"""Request id, whether the session is open after the request."""
 WARM_UP_HELLO = Hello(model="thesis_humanoid", controller="momentum")
 """Opened and closed before ``ready``, so imports and the model cache are warm
 and a client's first request is answered at once."""
@@ -60,16 +62,16 @@ def _warm_up(table: SessionTable) -> None:
     table.drop([b"warm-up"])
 
 
-def _serve_request(table: SessionTable, frames: list[bytes]) -> list[bytes]:
-    _, request_id, key, deadline, payload = frames
-    if time.monotonic() > DEADLINE.unpack(deadline)[0]:
+def _serve_request(table: SessionTable, header: bytes, payload: bytes) -> list[bytes]:
+    request_id, key, deadline_s = REQUEST_HEADER.unpack(header)
+    if time.monotonic() > deadline_s:
         return [b"late", request_id]
     try:
         reply = encode(table.handle(key, payload))
     except Exception as exc:  # encoding the reply failed: still a typed answer
         log.exception("could not encode a reply")
         reply = encode(Error(code=ErrorCode.INTERNAL, detail=f"{type(exc).__name__}: {exc}"))
-    return [b"rep", request_id, b"1" if key in table.sessions else b"0", reply]
+    return [b"rep", REPLY_HEADER.pack(request_id, key in table.sessions), reply]
 
 
 def run_worker(identity: bytes, backend: str, config: ServeConfig) -> None:
@@ -87,19 +89,21 @@ def run_worker(identity: bytes, backend: str, config: ServeConfig) -> None:
     socket = context.socket(zmq.DEALER)
     socket.setsockopt(zmq.LINGER, 0)
     socket.setsockopt(zmq.ROUTING_ID, identity)
+    socket.setsockopt(zmq.RCVTIMEO, PARENT_CHECK_INTERVAL_MS)
     socket.connect(backend)
     socket.send(b"ready")
     try:
         while True:
-            if not socket.poll(PARENT_CHECK_INTERVAL_MS):
+            try:
+                frames = socket.recv_multipart()
+            except zmq.Again:  # a quiet second: is the broker still there?
                 if os.getppid() != parent:
                     log.warning("broker gone: worker exits")
                     return
                 continue
-            frames = socket.recv_multipart()
             kind = frames[0]
-            if kind == b"req" and len(frames) == 5:
-                socket.send_multipart(_serve_request(table, frames))
+            if kind == b"req" and len(frames) == 3:
+                socket.send_multipart(_serve_request(table, frames[1], frames[2]))
             elif kind == b"drop":
                 table.drop(frames[1:])
             elif kind == b"stats" and len(frames) >= 2:

@@ -46,7 +46,7 @@ another `version` is answered by an `error` with code `UNSUPPORTED_VERSION`.
 | `hello` | `welcome` | open (or replace) this client's session: model + controller |
 | `state` | `command` | one control tick |
 | `set_params` | `params` | change controller parameters at run time (all or nothing) |
-| `stats` | `stats` | per-session tick counts and compute-time percentiles |
+| `stats` | `stats` | tick counts and compute-time percentiles of this client's sessions |
 | `bye` | `bye` | close the session |
 | anything bad | `error` | typed error naming the field; the session continues |
 
@@ -55,6 +55,15 @@ quaternions scalar-last `[x, y, z, w]`; joint order is the order of
 `welcome.joints`; contact order is the order of `welcome.contacts`.
 Sessions idle longer than the server's `--session-timeout` expire; the next
 `state` then gets `NO_SESSION` and the client repeats `hello`.
+
+A session belongs to the client's routing id and its CURVE key (or, without
+CURVE, its address). Each request is answered within the server's deadline
+(`poise serve --deadline`, `--hello-deadline`), or with `DEADLINE_EXCEEDED`;
+a server cap (sessions, requests in flight, message and model size) is
+answered with `LIMIT_EXCEEDED`. A client sends its next request after the
+reply to the last (or keeps at most `--max-in-flight` outstanding, default 2).
+The limits on `state` values below (|value| ≤ …) are part of the contract:
+beyond them a value is refused with `INVALID_FIELD` naming the field.
 """
 
 

@@ -122,7 +122,8 @@ class Hello(Message):
     type: Literal["hello"] = "hello"
     model: str | None = wire_field(
         "Built-in model name (`thesis_humanoid`, `revolute_humanoid`, `dino_biped`) or a "
-        "file path on the server.",
+        "file in one of the server's model directories (`poise serve --model-dir`), by its "
+        "path or its name relative to the directory.",
         default=None,
     )
     model_text: str | None = wire_field(

@@ -1,0 +1,142 @@
+"""Serving under load: workers, fairness and many paced clients, against a raw pyzmq echo.
+
+One run prints:
+
+1. aggregate replies/s of 4 clients at full rate, with 1 worker and with 2
+   (goal on a 2-core machine: ≥ 1.7×), for `momentum` and `prioritized`,
+   beside a raw pyzmq echo answering the same 4 clients (the transport's own
+   ceiling);
+2. 8 clients paced at 1 kHz each for 10 s: ticks answered, p50/p99 round trip;
+3. a `tracking` client at 200 Hz beside a `prioritized` client at full rate
+   (goal: the tracking client gets ≥ 95 % of its ticks within 5 ms).
+
+Usage: python bench/load.py [--seconds 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import sys
+
+import zmq
+
+from clients.load import ClientLoad, run_clients, standing_request
+from clients.server_process import ServerProcess
+from protocol.messages import Hello
+
+
+def echo_server(endpoint_queue: multiprocessing.Queue, reply_size: int) -> None:
+    context = zmq.Context()
+    socket = context.socket(zmq.ROUTER)
+    port = socket.bind_to_random_port("tcp://127.0.0.1")
+    endpoint_queue.put(f"tcp://127.0.0.1:{port}")
+    reply = b"\x00" * reply_size
+    while True:
+        identity, payload = socket.recv_multipart()
+        if payload == b"stop":
+            break
+        socket.send_multipart([identity, reply])
+    socket.close(linger=0)
+    context.term()
+
+
+def rate(loads: list[ClientLoad], seconds: float) -> float:
+    return sum(load.commands for load in loads) / seconds
+
+
+def log(text: str) -> None:
+    print(f"  … {text}", file=sys.stderr, flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=10.0, help="length of each part")
+    args = parser.parse_args()
+    seconds = args.seconds
+    hello = Hello(model="thesis_humanoid", controller="momentum")
+
+    print(f"1. four clients at full rate, {seconds:g} s each")
+    rates = {}
+    for controller in ("momentum", "prioritized"):
+        clients = [
+            (f"client {i}", Hello(model="thesis_humanoid", controller=controller), None)
+            for i in range(4)
+        ]
+        for workers in (1, 2):
+            with ServerProcess(extra_args=["--workers", str(workers)]) as server:
+                loads = run_clients(server.endpoint, clients, seconds, progress=log)
+                rates[controller, workers] = rate(loads, seconds)
+                if controller == "momentum" and workers == 1:
+                    request = standing_request(run_welcome(server.endpoint, hello))
+    queue: multiprocessing.Queue = multiprocessing.Queue()
+    echo = multiprocessing.Process(target=echo_server, args=(queue, 900), daemon=True)
+    echo.start()
+    echo_endpoint = queue.get(timeout=30)
+    echo_clients = [(f"client {i}", None, None) for i in range(4)]
+    echo_rate = rate(
+        run_clients(echo_endpoint, echo_clients, seconds, request=request, progress=log), seconds
+    )
+    stop = zmq.Context.instance().socket(zmq.DEALER)
+    stop.connect(echo_endpoint)
+    stop.send(b"stop")
+    echo.join(5)
+    stop.close(linger=0)
+    print(f"{'':<28}{'replies/s':>12}{'vs echo':>10}")
+    print(f"{'raw pyzmq echo':<28}{echo_rate:>12.0f}{1.0:>9.3f}x")
+    for controller in ("momentum", "prioritized"):
+        for workers in (1, 2):
+            value = rates[controller, workers]
+            label = f"{controller}, {workers} worker{'s' * (workers > 1)}"
+            print(f"{label:<28}{value:>12.0f}{value / echo_rate:>9.3f}x")
+        ratio = rates[controller, 2] / rates[controller, 1]
+        print(f"{controller}: 2 workers / 1 worker = {ratio:.2f}x (goal ≥ 1.7x)")
+
+    print(f"\n2. eight clients paced at 1 kHz, `momentum`, {seconds:g} s, 2 workers")
+    with ServerProcess(extra_args=["--workers", "2"]) as server:
+        paced = run_clients(
+            server.endpoint, [(f"client {i}", hello, 1000.0) for i in range(8)], seconds,
+            progress=log,
+        )  # fmt: skip
+    print(f"{'client':<12}{'ticks':>8}{'answered':>10}{'rate Hz':>9}{'p50 ms':>9}{'p99 ms':>9}"
+          f"  errors")  # fmt: skip
+    for load in paced:
+        print(
+            f"{load.label:<12}{load.ticks:>8}{load.commands:>10}{load.commands / seconds:>9.0f}"
+            f"{load.percentile_ms(50):>9.2f}{load.percentile_ms(99):>9.2f}  {load.errors or ''}"
+        )
+    print(f"all: {rate(paced, seconds):.0f} replies/s")
+
+    print(f"\n3. `tracking` at 200 Hz beside `prioritized` at full rate, {seconds:g} s, 2 workers")
+    with ServerProcess(extra_args=["--workers", "2"]) as server:
+        tracking, prioritized = run_clients(
+            server.endpoint,
+            [
+                ("tracking", Hello(model="thesis_humanoid", controller="tracking"), 200.0),
+                ("prioritized", Hello(model="thesis_humanoid", controller="prioritized"), None),
+            ],
+            seconds,
+            progress=log,
+        )
+    within = tracking.within(0.005)
+    print(
+        f"tracking: {tracking.ticks} ticks, {tracking.commands} answered, {within} within 5 ms "
+        f"({within / max(1, tracking.ticks):.1%}; goal ≥ 95 %), "
+        f"p50 {tracking.percentile_ms(50):.2f} ms, p99 {tracking.percentile_ms(99):.2f} ms"
+    )
+    print(
+        f"prioritized: {prioritized.commands} answered ({prioritized.commands / seconds:.0f}/s), "
+        f"p50 {prioritized.percentile_ms(50):.2f} ms, p99 {prioritized.percentile_ms(99):.2f} ms"
+        f"  {prioritized.errors or ''}"
+    )
+
+
+def run_welcome(endpoint: str, hello: Hello):
+    from clients import ControllerClient
+
+    with ControllerClient(endpoint, timeout_s=30.0) as client:
+        return client.connect(hello.model, controller=hello.controller)
+
+
+if __name__ == "__main__":
+    main()
