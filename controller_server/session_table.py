@@ -17,11 +17,14 @@ import gc
 import logging
 import time
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
-from controller_server.session import Session
 from protocol.codec import decode
 from protocol.errors import ErrorCode, ProtocolError
 from protocol.messages import Bye, Error, Hello, Message, SessionStats, SetParams, State, Stats
+
+if TYPE_CHECKING:
+    from controller_server.session import Session
 
 __all__ = ["SessionTable", "release_free_memory"]
 
@@ -107,6 +110,10 @@ class SessionTable:
                 f"{self.max_model_bytes} bytes (`poise serve --max-model-bytes`)",
                 request.seq,
             )
+        # Imported here: the broker keeps a table without sessions to answer requests
+        # that have none, and never loads Pinocchio or a controller.
+        from controller_server.session import Session
+
         try:
             session = Session(request)
         except ProtocolError as exc:

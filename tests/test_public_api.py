@@ -30,10 +30,15 @@ PACKAGES = [
     "controller_server.inverse_dynamics",
     "controller_server.server",
     "controller_server.session",
+    "controller_server.session_table",
+    "controller_server.worker",
+    "controller_server.config",
+    "controller_server.files",
     "controller_server.wire",
     "clients",
     "clients.client",
     "clients.sampling",
+    "clients.load",
     "clients.state",
     "clients.sim.backend",
     "clients.sim.model_file",
@@ -62,6 +67,19 @@ def test_protocol_does_not_import_robotics_code():
 
     heavy = ("pinocchio", "controller_server", "clients")
     code = f"import sys, protocol; print(sorted(m for m in {heavy!r} if m in sys.modules))"
+    assert subprocess.check_output([sys.executable, "-c", code], text=True).strip() == "[]"
+
+
+def test_the_broker_does_not_import_robotics_code():
+    """The broker process routes bytes; Pinocchio and the controllers live in the workers."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, controller_server.server, controller_server.cli; "
+        "print(sorted(m for m in ('pinocchio', 'controller_server.controllers') "
+        "if m in sys.modules))"
+    )
     assert subprocess.check_output([sys.executable, "-c", code], text=True).strip() == "[]"
 
 
