@@ -39,7 +39,7 @@ def test_readme_commands_are_what_ci_runs():
     assert "poise demo" in readme
 
 
-@pytest.mark.parametrize("command", ["", "serve", "demo", "sim"])
+@pytest.mark.parametrize("command", ["", "serve", "keygen", "demo", "sim"])
 def test_cli_help_runs_and_is_in_the_readme(command):
     args = [
         sys.executable,
@@ -86,7 +86,11 @@ def test_hello_client_example_runs(server):
 @pytest.mark.e2e
 @pytest.mark.parametrize(
     ("script", "args"),
-    [("roundtrip.py", ["--count", "50"]), ("controller.py", ["--ticks", "30"])],
+    [
+        ("roundtrip.py", ["--count", "50"]),
+        ("controller.py", ["--ticks", "30"]),
+        ("load.py", ["--seconds", "1"]),
+    ],
 )
 def test_benchmarks_run_and_print_ratios(script, args):
     output = subprocess.check_output(

@@ -114,7 +114,7 @@ def test_push_sweep_bisects_each_direction_and_waits_for_the_robot_to_settle(mon
     durations = set()
 
     class Run:
-        def __init__(self, scenario, endpoint):
+        def __init__(self, scenario, endpoint, curve=None):
             (push,) = scenario.pushes
             force_x = push.force_in_world_N[0]
             params = scenario.params
