@@ -20,25 +20,11 @@ import multiprocessing
 import sys
 
 import zmq
+from baselines import echo_server
 
 from clients.load import ClientLoad, run_clients, standing_request
 from clients.server_process import ServerProcess
 from protocol.messages import Hello
-
-
-def echo_server(endpoint_queue: multiprocessing.Queue, reply_size: int) -> None:
-    context = zmq.Context()
-    socket = context.socket(zmq.ROUTER)
-    port = socket.bind_to_random_port("tcp://127.0.0.1")
-    endpoint_queue.put(f"tcp://127.0.0.1:{port}")
-    reply = b"\x00" * reply_size
-    while True:
-        identity, payload = socket.recv_multipart()
-        if payload == b"stop":
-            break
-        socket.send_multipart([identity, reply])
-    socket.close(linger=0)
-    context.term()
 
 
 def rate(loads: list[ClientLoad], seconds: float) -> float:

@@ -17,27 +17,13 @@ import time
 
 import numpy as np
 import zmq
+from baselines import echo_server
 
 from clients import ControllerClient
 from clients.layout import neutral_joint_position
 from clients.server_process import ServerProcess
 from clients.state import RobotState
 from protocol import encode
-
-
-def echo_server(endpoint_queue: multiprocessing.Queue, reply_size: int) -> None:
-    context = zmq.Context()
-    socket = context.socket(zmq.ROUTER)
-    port = socket.bind_to_random_port("tcp://127.0.0.1")
-    endpoint_queue.put(f"tcp://127.0.0.1:{port}")
-    reply = b"\x00" * reply_size
-    while True:
-        identity, payload = socket.recv_multipart()
-        if payload == b"stop":
-            break
-        socket.send_multipart([identity, reply])
-    socket.close(linger=0)
-    context.term()
 
 
 def measure(round_trip, count: int, paced_hz: float | None) -> np.ndarray:

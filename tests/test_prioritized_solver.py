@@ -52,7 +52,15 @@ def feasible_inequalities(rng, n: int, rows: int, margin: float) -> tuple[np.nda
 
 
 def test_public_names():
-    assert set(prioritized.__all__) == {"LevelReport", "PrioritizedSolution", "solve_prioritized"}
+    assert set(prioritized.__all__) == {
+        "QP_ITERATION_LIMITS",
+        "QP_TIME_BUDGET_S",
+        "LevelReport",
+        "PrioritizedSolution",
+        "qp_data_limit",
+        "solve_prioritized",
+        "solve_qp_bounded",
+    }
 
 
 # 1. Closed form ------------------------------------------------------------------------------

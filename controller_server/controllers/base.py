@@ -18,18 +18,58 @@ from typing import Any, ClassVar
 import numpy as np
 import pinocchio as pin
 
+from controller_server.dynamics import DynamicsTerms
 from controller_server.errors import InvalidParams
 from controller_server.models import RobotModel
+from protocol.errors import ErrorCode, ProtocolError
 
 __all__ = [
     "CONTACT_PARAMETERS",
     "ControlInput",
     "ControlOutput",
     "Controller",
+    "ControllerFailed",
     "ParamSpec",
+    "check_finite_dynamics",
     "normalized_configuration_part",
     "vector_value",
 ]
+
+
+class ControllerFailed(ProtocolError):
+    """A controller found no command for a valid request (``INTERNAL``; the session is kept).
+
+    Raised instead of numerical exceptions (``LinAlgError``, a solver giving up), with one
+    line saying what failed, so that no tick ends in an untyped error.
+    """
+
+    def __init__(self, detail: str):
+        super().__init__(ErrorCode.INTERNAL, "controller", detail)
+
+
+def check_finite_dynamics(terms: DynamicsTerms) -> None:
+    """Refuse a state whose velocity terms overflowed (velocities far beyond any robot's).
+
+    Raises:
+        ControllerFailed: Naming the non-finite terms and the largest velocity.
+    """
+    momentum = terms.momentum
+    groups = {
+        "bias forces": (terms.bias_forces,),
+        "contact drifts": (*terms.support_drifts, *terms.point_drifts),
+        "momentum": (
+            momentum.r_bias,
+            momentum.s_bias,
+            momentum.linear_momentum,
+            momentum.angular_momentum,
+        ),
+    }
+    bad = [name for name, arrays in groups.items() if not all(np.isfinite(a).all() for a in arrays)]
+    if bad:
+        raise ControllerFailed(
+            f"non-finite {', '.join(bad)} at this state (max |v| = "
+            f"{float(np.max(np.abs(terms.v))):.3g}: the dynamics overflow); no command"
+        )
 
 
 def vector_value(field: str, value: Any, length: int) -> np.ndarray:
@@ -38,7 +78,10 @@ def vector_value(field: str, value: Any, length: int) -> np.ndarray:
         isinstance(x, bool) or not isinstance(x, int | float | np.floating) for x in value
     ):
         raise InvalidParams(field, f"{value=!r} is not a list of numbers")
-    array = np.asarray(value, dtype=float).reshape(-1)
+    try:
+        array = np.asarray(value, dtype=float).reshape(-1)
+    except OverflowError:  # a Python int beyond the float range (not printed: it may be huge)
+        raise InvalidParams(field, "a value is beyond the float range; must be finite") from None
     if array.size != length:
         raise InvalidParams(field, f"expected {length} values, got {array.size}")
     if not np.all(np.isfinite(array)):
@@ -209,9 +252,16 @@ class Controller(ABC):
         if spec.kind in ("float", "int"):
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise InvalidParams(field, f"{value=!r} is not a number")
-            if spec.kind == "int" and float(value) != int(value):
+            # Finite first: int() of inf or NaN would raise; a huge int overflows float().
+            try:
+                number = float(value)
+            except OverflowError:
+                raise InvalidParams(field, "value beyond the float range; must be finite") from None
+            if not math.isfinite(number):
+                raise InvalidParams(field, f"{value=!r} must be finite")
+            if spec.kind == "int" and number != math.floor(number):
                 raise InvalidParams(field, f"{value=!r} is not an integer")
-            array = np.array([float(value)])
+            array = np.array([number])
         else:
             array = vector_value(field, value, np.size(self.default_value(key)))
         if not np.all(np.isfinite(array)):

@@ -22,6 +22,7 @@ thesis' baseline, and the first ablation of ch. 7.1.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -38,8 +39,10 @@ from controller_server.controllers.base import (
     CONTACT_PARAMETERS,
     ControlInput,
     Controller,
+    ControllerFailed,
     ControlOutput,
     ParamSpec,
+    check_finite_dynamics,
     normalized_configuration_part,
     vector_value,
 )
@@ -285,9 +288,12 @@ class MomentumController(Controller):
             number = merged[name]
             if isinstance(number, bool) or not isinstance(number, int | float):
                 raise InvalidParams(f"{field}.{name}", f"{number!r} is not a number")
-            if not np.isfinite(number) or number < 0:
+            try:
+                scalars[name] = float(number)
+            except OverflowError:  # a Python int beyond the float range (not printed: huge)
+                raise InvalidParams(f"{field}.{name}", "beyond the float range") from None
+            if not math.isfinite(number) or number < 0:
                 raise InvalidParams(f"{field}.{name}", f"{number!r} must be finite and ≥ 0")
-            scalars[name] = float(number)
         if "target_position_in_world" not in value:
             raise InvalidParams(f"{field}.target_position_in_world", "required")
         return PointTarget(
@@ -321,7 +327,18 @@ class MomentumController(Controller):
         :func:`exact_inverse_dynamics` (two RNEA passes: the thesis' 1 kHz
         inverse-dynamics loop, ch. 4.3); the full terms are computed only when
         the optimizer runs, in measured mode, or when that exact case fails.
+
+        Raises:
+            InvalidParams: Measured ground-force mode without measured wrenches.
+            ControllerFailed: The dynamics overflow at this state, or a linear solve failed
+                (e.g. a mass matrix that is not positive definite).
         """
+        try:
+            return self._compute(control_input)
+        except np.linalg.LinAlgError as error:
+            raise ControllerFailed(f"a linear solve failed at this state: {error}") from error
+
+    def _compute(self, control_input: ControlInput) -> ControlOutput:
         p = self._params
         robot, q, v = self.robot, control_input.q, control_input.v
         measured = p["ground_force_mode"] == "measured"
@@ -358,6 +375,7 @@ class MomentumController(Controller):
             )
         if dynamics is None:
             terms = compute_dynamics_terms(robot, self._data, q, v)
+            check_finite_dynamics(terms)
             points, origins = terms.position_points_in_world, terms.position_contact_frames_in_world
             if run_optimizer:
                 polygon = _support_polygon(points, flags)

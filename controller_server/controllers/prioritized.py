@@ -54,8 +54,10 @@ from controller_server.controllers.base import (
     CONTACT_PARAMETERS,
     ControlInput,
     Controller,
+    ControllerFailed,
     ControlOutput,
     ParamSpec,
+    check_finite_dynamics,
     normalized_configuration_part,
 )
 from controller_server.dynamics import DynamicsTerms, compute_dynamics_terms
@@ -72,7 +74,6 @@ from controller_server.features.setpoint import (
 from controller_server.inverse_dynamics import wrenches_from_point_forces
 from controller_server.models import RobotModel
 from controller_server.solvers.prioritized import PrioritizedSolution, solve_prioritized
-from protocol.errors import ErrorCode, ProtocolError
 
 __all__ = ["OBJECTIVES", "PrioritizedController", "friction_cone_basis"]
 
@@ -281,9 +282,23 @@ class PrioritizedController(Controller):
     # One tick -------------------------------------------------------------------
 
     def compute(self, control_input: ControlInput) -> ControlOutput:
-        """Build the levels and inequalities, solve them (Algorithm 1), read off τ, q̈, f."""
+        """Build the levels and inequalities, solve them (Algorithm 1), read off τ, q̈, f.
+
+        Raises:
+            ControllerFailed: The problem data are not finite at this state, the equations of
+                motion could not be solved (every QP solver failed, the QP time budget was
+                spent, or the inequality terms are too large to check), or a linear solve
+                failed.
+        """
+        try:
+            return self._compute(control_input)
+        except np.linalg.LinAlgError as error:
+            raise ControllerFailed(f"a linear solve failed at this state: {error}") from error
+
+    def _compute(self, control_input: ControlInput) -> ControlOutput:
         p, robot = self._params, self.robot
         terms = compute_dynamics_terms(robot, self._data, control_input.q, control_input.v)
+        check_finite_dynamics(terms)
         flags = self.supports(control_input)
         layout = _Layout(
             robot,
@@ -308,16 +323,25 @@ class PrioritizedController(Controller):
             )
         ]
         D, f = self._inequalities(control_input, terms, layout)
+        not_finite = [
+            name
+            for name, objective in objectives.items()
+            if not (np.isfinite(objective.A).all() and np.isfinite(objective.b).all())
+        ] + ([] if np.isfinite(D).all() and np.isfinite(f).all() else ["inequalities"])
+        if not_finite:  # velocities so large that the objectives overflow
+            raise ControllerFailed(
+                f"non-finite {', '.join(not_finite)} at this state (the dynamics overflow); "
+                "no command"
+            )
         # The equations of motion are kept exactly (rounding floor only): a gain bound there
         # would let lower levels bend the dynamics of a heavy robot.
         bounds = [EXACT_GAIN_BOUND] + [p["gain_bound"]] * (len(ordered) - 1)
         solution = solve_prioritized(ordered, D, f, gain_bound=bounds, qp_solver=p["qp_solver"])
-        if solution.levels[0].status != "solved":
-            raise ProtocolError(
-                ErrorCode.INTERNAL,
-                "controller",
-                f"the equations of motion could not be solved ({solution.levels[0].status}, "
-                f"QP solver {p['qp_solver']}); no command",
+        top = solution.levels[0]
+        if top.status != "solved":
+            raise ControllerFailed(
+                f"the equations of motion could not be solved ({top.status}, QP solver "
+                f"{p['qp_solver']}{': ' + top.detail if top.detail else ''}); no command"
             )
         return self._output(terms, layout, flags, objectives, desired_rates, solution)
 

@@ -85,6 +85,19 @@ daqp (the default) solved all, quadprog failed on 0.2 % and proxqp on
 vertices, where the inequality tolerances matter); proxqp is moreover not
 exactly repeatable (identical calls once differed by 1e-6).
 
+Every QP solve is bounded. Each solver call has an iteration cap
+(:data:`QP_ITERATION_LIMITS`; quadprog, an active-set method, ends by
+itself), and one call of :func:`solve_prioritized` tries no QP twice (retry
+settings, second curvature) once its QP solves have taken
+:data:`QP_TIME_BUDGET_S` of wall time: a level whose solvers have each failed
+once then fails. Nor is a QP started on inequality data too large for the
+feasibility test to mean anything (:func:`qp_data_limit`): with ``|D x + f|``
+beyond ``tolerance / ε``, rounding alone exceeds the tolerance, no solver can
+meet it (their own tolerances are absolute too), and the iterative ones spin
+to their caps, or overflow into NaN residuals they never recover from. With
+joint velocities of 1e150 (data ~1e300) ProxQP ran the full 1500 inner
+iterations of each of its 1000 outer ones: ~24 s per call, minutes per tick.
+
 The equations of motion are not special: as de Lasa 2010 (§8.2, after eq.
 36) recommend, give them as the top-priority level rather than as
 equality constraints.
@@ -95,18 +108,55 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import qpsolvers
+import scipy.sparse
+from qpsolvers.conversions import combine_linear_box_inequalities
 from qpsolvers.exceptions import QPError
+
+try:
+    from proxsuite import proxqp
+except ImportError:  # optional backend: qpsolvers then reports it as not installed
+    proxqp = None
 
 from controller_server.features import Objective
 from controller_server.solvers.damped import damping_for_gain_bound
 
-__all__ = ["LevelReport", "PrioritizedSolution", "solve_prioritized"]
+__all__ = [
+    "QP_ITERATION_LIMITS",
+    "QP_TIME_BUDGET_S",
+    "LevelReport",
+    "PrioritizedSolution",
+    "qp_data_limit",
+    "solve_prioritized",
+    "solve_qp_bounded",
+]
 
 LevelStatus = Literal["solved", "infeasible", "solver failed", "not reached", "empty"]
+
+QP_TIME_BUDGET_S = 0.02
+"""Wall time (s) of the QP solves of one :func:`solve_prioritized` call after which no QP is
+tried twice: no solver's retry settings, no second null-space curvature. A level whose QP
+has not succeeded by then fails as if every solver had (``"solver failed"``, or
+``"infeasible"`` at the top level). Each solver of a level's chain (the chosen one; at the
+top level also the others) is still tried once, capped by :data:`QP_ITERATION_LIMITS`: a
+slow machine loses only second tries, and the top level keeps its rescue by another solver
+(ProxQP, when chosen, can take 50 ms on a feasible level near standing). A tick thus costs
+at most about this budget plus one capped call per level and solver. With daqp, ticks near
+standing spend under 1 ms in QPs."""
+
+QP_ITERATION_LIMITS: dict[str, dict[str, int]] = {
+    # Active-set iterations; at most 77 on seeded near-standing states of the built-in models
+    # (p99 222 on the test stacks). Each costs ~5–10 µs at 116 unknowns.
+    "daqp": {"iter_limit": 1000},
+    # Outer (augmented Lagrangian) and inner (semi-smooth Newton) iterations: converged solves
+    # of the built-in models took up to 731 outer and ~2 inner ones each. ProxQP's default of
+    # 1500 inner iterations per outer one made a capped solve still run for minutes.
+    "proxqp": {"max_iter": 1000, "max_iter_in": 20},
+}
+"""Iteration caps of every QP solve (:func:`solve_qp_bounded`); quadprog needs none."""
 
 
 _FALLBACK_ORDER = ("daqp", "quadprog", "proxqp")
@@ -151,14 +201,14 @@ _BACKENDS: dict[str, _Backend] = {
     # Default eps_abs 1e-5. Declares degenerate feasible levels infeasible; asked for the closest
     # feasible point instead, it returns the optimum there (checked by _solve_level), but in that
     # mode once stopped early (objective 2e-5 off) unless the duality gap is checked too. The
-    # iteration cap makes a truly infeasible level cost ~10 ms (both attempts) instead of ~1 s.
+    # iteration caps (QP_ITERATION_LIMITS) make a truly infeasible level cost ~10 ms (both
+    # attempts) instead of ~1 s.
     "proxqp": _Backend(
         {
             "eps_abs": 1e-9,
             "eps_rel": 0.0,
             "primal_infeasibility_solving": True,
             "check_duality_gap": True,
-            "max_iter": 1000,
         },
         retry={"eps_abs": 1e-8},
     ),
@@ -186,6 +236,8 @@ class LevelReport:
             singular value σ above the rounding floor; 0 when no direction was damped.
         singular_value_tolerance: ``max(1/B, σ_max · max(m, k) · ε)``; 0 when not solved.
         used_qp: Whether the level needed a QP (the closed form violated an inequality).
+        detail: Why the level's QP gave no solution (``""`` if it did, or needed none):
+            every solver failed, the time budget was spent, or the data were out of range.
     """
 
     names: tuple[str, ...]
@@ -196,6 +248,7 @@ class LevelReport:
     damping: float
     singular_value_tolerance: float
     used_qp: bool
+    detail: str = ""
 
 
 @dataclass(frozen=True)
@@ -210,6 +263,8 @@ class PrioritizedSolution:
         inequality_violation: ``max(0, max(−(D x + f)))``.
         qp_solver: Name of the QP solver used for constrained levels.
         solve_time_s: Wall time of the solve (s).
+        qp_attempts: Number of QP solver calls (every solver, retry and level).
+        qp_time_s: Wall time of those calls (s).
     """
 
     found: bool
@@ -218,6 +273,8 @@ class PrioritizedSolution:
     inequality_violation: float
     qp_solver: str
     solve_time_s: float
+    qp_attempts: int = 0
+    qp_time_s: float = 0.0
 
 
 def solve_prioritized(
@@ -228,6 +285,7 @@ def solve_prioritized(
     gain_bound: float | Sequence[float] = 1e6,
     qp_solver: str = "daqp",
     feasibility_tolerance: float = 1e-7,
+    qp_time_budget_s: float = QP_TIME_BUDGET_S,
 ) -> PrioritizedSolution:
     """Solve the prioritized problem of de Lasa 2010, eq. 17, by Algorithm 1.
 
@@ -245,10 +303,13 @@ def solve_prioritized(
         qp_solver: A :mod:`qpsolvers` solver name (tested: ``"daqp"``, ``"quadprog"``,
             ``"proxqp"``).
         feasibility_tolerance: Largest accepted violation of ``D x + f ≥ 0`` after a QP.
+        qp_time_budget_s: No QP is tried twice (retry settings, second curvature) once the
+            QP solves took this long (s). See :data:`QP_TIME_BUDGET_S`.
 
     Returns:
-        The solution and per-level reports. Never raises for infeasible inequalities or
-        solver failures: see :attr:`LevelReport.status`.
+        The solution and per-level reports. Never raises for infeasible inequalities,
+        solver failures, a spent time budget or inequality data too large to check: see
+        :attr:`LevelReport.status` and :attr:`LevelReport.detail`.
 
     Raises:
         ValueError: On inconsistent shapes, negative or non-finite weights, non-finite
@@ -278,6 +339,7 @@ def solve_prioritized(
     d_bar = np.zeros(n)
     slack = f.copy()  # D d̄ + f, kept up to date with d̄
     reports: list[LevelReport] = []
+    clock = _QPClock(qp_time_budget_s)
     stopped = infeasible = failed = False
     for level_index, (names, A, b) in enumerate(stacked):
         if stopped:
@@ -298,13 +360,22 @@ def solve_prioritized(
             qp_solver,
             feasibility_tolerance,
             persist=level_index == 0,
+            clock=clock,
         )
         if step.w is None and level_index > 0 and _any_solved(reports):
             # Below a solved level w = 0 is feasible, so this is the QP solver failing, not
             # Algorithm 1's infeasibility: keep d̄ and C̄ and go on with the next level.
             reports.append(
                 LevelReport(
-                    names, "solver failed", 0.0, 0, dimension, step.damping, step.tolerance, True
+                    names,
+                    "solver failed",
+                    0.0,
+                    0,
+                    dimension,
+                    step.damping,
+                    step.tolerance,
+                    True,
+                    step.detail,
                 )
             )
             failed = True
@@ -312,7 +383,15 @@ def solve_prioritized(
         if step.w is None:  # lines 7–8: keep d̄ of the levels above
             reports.append(
                 LevelReport(
-                    names, "infeasible", 0.0, 0, 0, step.damping, step.tolerance, step.used_qp
+                    names,
+                    "infeasible",
+                    0.0,
+                    0,
+                    0,
+                    step.damping,
+                    step.tolerance,
+                    step.used_qp,
+                    step.detail,
                 )
             )
             stopped = infeasible = True
@@ -352,7 +431,80 @@ def solve_prioritized(
         inequality_violation=violation,
         qp_solver=qp_solver,
         solve_time_s=time.perf_counter() - start,
+        qp_attempts=clock.attempts,
+        qp_time_s=clock.spent_s,
     )
+
+
+def qp_data_limit(feasibility_tolerance: float) -> float:
+    """Largest ``|D x + f|`` (and step ``|D w|``) a level's QP is attempted with.
+
+    Beyond ``feasibility_tolerance / ε`` the rounding of ``D x + f`` alone exceeds the
+    tolerance: whether the inequalities hold can no longer be decided, and no solver can
+    meet tolerances that fine (1e-7 allows terms up to about 4.5e8).
+    """
+    return feasibility_tolerance / float(np.finfo(float).eps)
+
+
+def solve_qp_bounded(
+    problem: qpsolvers.Problem, solver: str, **settings: Any
+) -> qpsolvers.Solution:
+    """:func:`qpsolvers.solve_problem` within the iteration caps of :data:`QP_ITERATION_LIMITS`.
+
+    ``settings`` may lower a cap but not raise it. ProxQP is called through its own dense
+    ``QP`` class (same settings, same defaults), because ``qpsolvers`` passes on only the
+    options of ``proxqp.dense.solve``, which lack the inner-iteration cap ``max_iter_in``.
+
+    Raises:
+        qpsolvers.exceptions.QPError: As :func:`qpsolvers.solve_problem` (unknown solver,
+            inconsistent problem).
+    """
+    limits = QP_ITERATION_LIMITS.get(solver, {})
+    capped = {**settings, **{key: min(cap, settings.get(key, cap)) for key, cap in limits.items()}}
+    P, q, G, h, A, b, lb, ub = problem.unpack()
+    dense = not any(scipy.sparse.issparse(matrix) for matrix in (P, G, A))
+    if solver != "proxqp" or proxqp is None or not dense:
+        if solver == "proxqp":  # qpsolvers' proxqp_solve_problem knows no max_iter_in
+            capped.pop("max_iter_in", None)
+        return qpsolvers.solve_problem(problem, solver=solver, **capped)
+    C, upper, lower = combine_linear_box_inequalities(G, h, lb, ub, q.size, False)
+    model = proxqp.dense.QP(
+        q.size,
+        0 if A is None else A.shape[0],
+        0 if C is None else C.shape[0],
+        dense_backend=proxqp.dense.DenseBackend.PrimalDualLDLT,  # as proxqp.dense.solve
+    )
+    for key, value in capped.items():
+        if not hasattr(model.settings, key):
+            raise qpsolvers.ParamError(f"unknown ProxQP setting {key!r}")
+        setattr(model.settings, key, value)
+    start = time.perf_counter()
+    model.init(P, q, A, b, C, lower, upper)
+    model.solve()
+    info = model.results.info
+    return qpsolvers.Solution(
+        problem,
+        extras={"info": info},
+        found=info.status == proxqp.QPSolverOutput.PROXQP_SOLVED,
+        x=np.array(model.results.x),
+        solve_time=time.perf_counter() - start,
+    )
+
+
+@dataclass
+class _QPClock:
+    """The QP solves of one :func:`solve_prioritized` call, against its time budget."""
+
+    budget_s: float
+    attempts: int = 0
+    spent_s: float = 0.0
+    refusals: int = 0
+
+    def allows(self, fallback: bool) -> bool:
+        """Whether a QP may start: a solver's first attempt always, a fallback within budget."""
+        allowed = not fallback or self.spent_s < self.budget_s
+        self.refusals += not allowed
+        return allowed
 
 
 def _any_solved(reports: Sequence[LevelReport]) -> bool:
@@ -371,6 +523,7 @@ class _LevelStep:
     damping: float
     tolerance: float
     used_qp: bool
+    detail: str = ""
 
 
 def _solve_level(
@@ -382,6 +535,7 @@ def _solve_level(
     qp_solver: str,
     feasibility_tolerance: float,
     persist: bool,
+    clock: _QPClock,
 ) -> _LevelStep:
     """Algorithm 1, lines 5–6 and ``null(Ā)``, from one SVD of ``Ā``."""
     m, k = A_bar.shape
@@ -409,9 +563,21 @@ def _solve_level(
     null_basis = Vt[rank:].T
     used_qp = False
     if D_C_bar.shape[0]:
-        new_slack = slack + D_C_bar @ w
-        if np.min(new_slack) < -feasibility_tolerance:
+        D_C_bar_w = D_C_bar @ w
+        new_slack = slack + D_C_bar_w
+        if not np.min(new_slack) >= -feasibility_tolerance:  # violated, or NaN
             used_qp = True
+            magnitude = float(np.max(np.abs(np.concatenate([slack, D_C_bar_w]))))
+            limit = qp_data_limit(feasibility_tolerance)
+            if not magnitude <= limit:  # also NaN
+                detail = (
+                    f"no QP: inequality terms |D x + f| reach {magnitude:.3g}, beyond {limit:.3g} "
+                    f"where rounding exceeds the feasibility tolerance {feasibility_tolerance:g}"
+                )
+                return _LevelStep(
+                    None, slack, null_basis, rank, damping, tolerance, used_qp, detail
+                )
+            refusals = clock.refusals
             D_C_bar_V = D_C_bar @ Vt.T
             # Violations already accepted (≤ tolerance, by a level above) may stay but not
             # grow: w = 0 is then exactly feasible, which degenerate vertices (more active
@@ -419,7 +585,8 @@ def _solve_level(
             bound = np.where(slack >= -feasibility_tolerance, np.maximum(slack, 0.0), slack)
             # The top level, where a failure ends the solve, tries every solver and both
             # curvatures; below it a failure only skips the level, so one solver is enough.
-            for null_curvature in _NULL_CURVATURES if persist else _NULL_CURVATURES[:1]:
+            curvatures = _NULL_CURVATURES if persist else _NULL_CURVATURES[:1]
+            for index, null_curvature in enumerate(curvatures):
                 curvature[used:] = max((null_curvature * sigma_max) ** 2, np.finfo(float).tiny)
                 z_qp = _solve_qp(
                     curvature,
@@ -430,6 +597,8 @@ def _solve_level(
                     rank,
                     feasibility_tolerance,
                     fallbacks=persist,
+                    clock=clock,
+                    first=index == 0,
                 )
                 if z_qp is None:
                     continue
@@ -438,7 +607,14 @@ def _solve_level(
                     w = Vt.T @ z_qp
                     break
             else:
-                return _LevelStep(None, slack, null_basis, rank, damping, tolerance, used_qp)
+                detail = (
+                    f"QP time budget of {clock.budget_s * 1e3:g} ms spent"
+                    if clock.refusals > refusals
+                    else f"no QP solver found a solution (chosen: {qp_solver})"
+                )
+                return _LevelStep(
+                    None, slack, null_basis, rank, damping, tolerance, used_qp, detail
+                )
         slack = new_slack
     return _LevelStep(w, slack, null_basis, rank, damping, tolerance, used_qp)
 
@@ -452,12 +628,17 @@ def _solve_qp(
     rank: int,
     feasibility_tolerance: float,
     fallbacks: bool,
+    clock: _QPClock,
+    first: bool,
 ) -> np.ndarray | None:
     """``min ½ Σ hᵢ zᵢ² − Σ lᵢ zᵢ  s.t.  D C̄ V z + bound ≥ 0`` (eq. 35 in ``z = Vᵀ w``).
 
     The chosen solver first (with its retry settings), then, with
     ``fallbacks``, the other tested solvers: an active-set solver stalling on a
-    degenerate vertex does not make the problem infeasible.
+    degenerate vertex does not make the problem infeasible. Each call is capped in
+    iterations (:func:`solve_qp_bounded`). With ``first`` (the level's first curvature) each
+    solver's first settings always run; retry settings, and every attempt without
+    ``first``, only while ``clock``'s budget lasts.
     """
     names = [qp_solver] + [
         name
@@ -478,11 +659,19 @@ def _solve_qp(
         attempts = [backend.settings]
         if backend.retry is not None:
             attempts.append({**backend.settings, **backend.retry})
-        for settings in attempts:
+        for retry, settings in enumerate(attempts):
+            # Past the budget every solver of the chain is still tried once, but nothing
+            # twice: no retry settings, no second curvature.
+            if not clock.allows(fallback=retry > 0 or not first):
+                break
+            start = time.perf_counter()
             try:
-                solution = qpsolvers.solve_problem(problem, solver=name, **settings)
+                solution = solve_qp_bounded(problem, name, **settings)
             except (QPError, ValueError, np.linalg.LinAlgError):
                 continue
+            finally:
+                clock.attempts += 1
+                clock.spent_s += time.perf_counter() - start
             info = solution.extras.get("info") if isinstance(solution.extras, dict) else None
             closest = info is not None and str(info.status).endswith("CLOSEST_PRIMAL_FEASIBLE")
             z = solution.x

@@ -245,4 +245,5 @@ def _peek_seq(data: bytes) -> int | None:
         payload = msgpack.unpackb(data)
     except Exception:
         return None
-    return payload.get("seq") if isinstance(payload, dict) else None
+    seq = payload.get("seq") if isinstance(payload, dict) else None
+    return seq if type(seq) is int else None  # `true` and `1.0` are not seq 1
