@@ -17,7 +17,10 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
+import os
 import sys
+import time
+from pathlib import Path
 
 import zmq
 from baselines import echo_server
@@ -25,6 +28,20 @@ from baselines import echo_server
 from clients.load import ClientLoad, run_clients, standing_request
 from clients.server_process import ServerProcess
 from protocol.messages import Hello
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def server_cpu_seconds(server: ServerProcess) -> tuple[float, float]:
+    """CPU seconds of the broker and of all its workers."""
+    assert server.process is not None
+    children = Path(f"/proc/{server.process.pid}/task/{server.process.pid}/children")
+    workers = [int(pid) for pid in children.read_text().split()]
+    return cpu_seconds(server.process.pid), sum(map(cpu_seconds, workers))
 
 
 def rate(loads: list[ClientLoad], seconds: float) -> float:
@@ -43,7 +60,7 @@ def main() -> None:
     hello = Hello(model="thesis_humanoid", controller="momentum")
 
     print(f"1. four clients at full rate, {seconds:g} s each")
-    rates = {}
+    rates, cpu = {}, {}
     for controller in ("momentum", "prioritized"):
         clients = [
             (f"client {i}", Hello(model="thesis_humanoid", controller=controller), None)
@@ -51,8 +68,16 @@ def main() -> None:
         ]
         for workers in (1, 2):
             with ServerProcess(extra_args=["--workers", str(workers)]) as server:
+                before, client_before = server_cpu_seconds(server), time.process_time()
                 loads = run_clients(server.endpoint, clients, seconds, progress=log)
+                after, client_after = server_cpu_seconds(server), time.process_time()
                 rates[controller, workers] = rate(loads, seconds)
+                replies = max(1, sum(load.commands for load in loads))
+                cpu[controller, workers] = [
+                    (after[0] - before[0]) / replies,
+                    (after[1] - before[1]) / replies,
+                    (client_after - client_before) / replies,
+                ]
                 if controller == "momentum" and workers == 1:
                     request = standing_request(run_welcome(server.endpoint, hello))
     queue: multiprocessing.Queue = multiprocessing.Queue()
@@ -68,13 +93,17 @@ def main() -> None:
     stop.send(b"stop")
     echo.join(5)
     stop.close(linger=0)
-    print(f"{'':<28}{'replies/s':>12}{'vs echo':>10}")
+    print(f"{'':<28}{'replies/s':>12}{'vs echo':>10}   CPU µs per reply: broker, workers, clients")
     print(f"{'raw pyzmq echo':<28}{echo_rate:>12.0f}{1.0:>9.3f}x")
     for controller in ("momentum", "prioritized"):
         for workers in (1, 2):
             value = rates[controller, workers]
             label = f"{controller}, {workers} worker{'s' * (workers > 1)}"
-            print(f"{label:<28}{value:>12.0f}{value / echo_rate:>9.3f}x")
+            broker, work, client = (x * 1e6 for x in cpu[controller, workers])
+            print(
+                f"{label:<28}{value:>12.0f}{value / echo_rate:>9.3f}x   "
+                f"{broker:.0f}, {work:.0f}, {client:.0f}"
+            )
         ratio = rates[controller, 2] / rates[controller, 1]
         print(f"{controller}: 2 workers / 1 worker = {ratio:.2f}x (goal ≥ 1.7x)")
 
