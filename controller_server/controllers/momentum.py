@@ -124,7 +124,9 @@ class MomentumController(Controller):
             doc="reference root orientation in world, scalar last",
         ),
         "clip": ParamSpec(
-            "", kind="text", doc="motion clip to track: built-in name or server path ('' = pose)"
+            "",
+            kind="text",
+            doc="motion clip to track: built-in name or a .json file in a --model-dir ('' = pose)",
         ),
         "clip_start_s": ParamSpec(
             0.0, minimum=-1e9, maximum=1e9, doc="state time of clip start (s)"
