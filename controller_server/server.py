@@ -283,7 +283,6 @@ class ControllerServer:
             for pending in worker.pending.values():
                 if not pending.answered:
                     soonest = min(soonest, pending.deadline_s)
-                    break  # served in order: the first unanswered is the one due
         return max(0, int((soonest - time.monotonic()) * 1000) + 1)
 
     # ----------------------------------------------------------------- clients
