@@ -30,7 +30,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, NoReturn
 
 import zmq
 import zmq.auth
@@ -405,6 +405,7 @@ class ControllerClient:
         if self._socket is None:
             self._socket = self._context.socket(zmq.DEALER)
             self._socket.setsockopt(zmq.LINGER, 0)
+            self._socket.setsockopt(zmq.SNDTIMEO, max(1, int(self.timeout_s * 1000)))
             # A random routing id: another peer cannot guess it to reach this session.
             self._socket.setsockopt(zmq.ROUTING_ID, b"c" + os.urandom(15))
             if self.curve is not None:
@@ -426,7 +427,10 @@ class ControllerClient:
 
     def _post(self, message: Message) -> int:
         self._seq += 1
-        self._open_socket().send(encode(message.model_copy(update={"seq": self._seq})))
+        try:  # a DEALER with no connected peer (a refused CURVE handshake) blocks on send
+            self._open_socket().send(encode(message.model_copy(update={"seq": self._seq})))
+        except zmq.Again:
+            self._timed_out(message.type, self.timeout_s)
         return self._seq
 
     def _await(self, seq: int, request_type: str, reply_type: type[Any], timeout_s: float) -> Any:
@@ -448,6 +452,9 @@ class ControllerClient:
                     seq,
                 )
             return reply
+        self._timed_out(request_type, timeout_s)
+
+    def _timed_out(self, request_type: str, timeout_s: float) -> NoReturn:
         self._needs_reconnect = True
         check = "check that `poise serve` is running there"
         if self.curve is not None:

@@ -27,6 +27,7 @@ __all__ = ["ClientLoad", "run_clients", "standing_request"]
 
 REPLY_TIMEOUT_S = 5.0
 COMMAND_PREFIX = msgpack.packb("type") + msgpack.packb("command")
+ERROR_NAMES = {int(code): code.name for code in ErrorCode}
 
 
 @dataclasses.dataclass
@@ -114,7 +115,10 @@ def _client(
                 load.round_trip_s.append(time.perf_counter() - sent)
             else:
                 reply = msgpack.unpackb(data)
-                key = ErrorCode(reply["code"]).name if "code" in reply else str(reply.get("type"))
+                code = reply.get("code")
+                key = (
+                    ERROR_NAMES.get(code, str(code)) if code is not None else str(reply.get("type"))
+                )
                 load.errors[key] = load.errors.get(key, 0) + 1
         if hello is not None:  # close the session; late replies before the bye are skipped
             socket.send(encode(Bye(seq=1)))
