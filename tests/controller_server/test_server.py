@@ -204,3 +204,32 @@ def test_diagnostics_come_every_nth_tick_and_change_no_command(server, controlle
         np.testing.assert_array_equal(sparse.joint_torque, full.joint_torque)
         np.testing.assert_array_equal(sparse.joint_acceleration, full.joint_acceleration)
         np.testing.assert_array_equal(sparse.contact_wrench_in_world, full.contact_wrench_in_world)
+
+
+def test_quaternions_are_normalised_and_far_off_ones_refused(server):
+    """Issue 11, defect 2: the normalised copy was discarded, so a quaternion scaled ×1.1
+    changed torques by up to 51 N·m and ×2 gave INTERNAL."""
+    welcome = hello(server, controller="momentum")
+    hello(server, BOB, controller="momentum")
+    state = random_state(welcome, np.random.default_rng(8))
+    reference = ask(server, ALICE, state)
+    scaled_ball = state.joint_position.copy()
+    scaled_ball[:4] *= 1.05  # first joint of the thesis humanoid is a ball joint
+    scaled = state.model_copy(
+        update={
+            "orientation_base_in_world_xyzw": state.orientation_base_in_world_xyzw * 0.95,
+            "joint_position": scaled_ball,
+        }
+    )
+    command = ask(server, BOB, scaled)  # a fresh session: same controller history
+    assert isinstance(reference, Command) and isinstance(command, Command)
+    np.testing.assert_allclose(command.joint_torque, reference.joint_torque, atol=1e-8)
+    for factor, field in [(2.0, "orientation_base_in_world_xyzw"), (13.9, "joint_position")]:
+        if field == "joint_position":
+            values = state.joint_position.copy()
+            values[:4] *= factor
+        else:
+            values = state.orientation_base_in_world_xyzw * factor
+        reply = ask(server, ALICE, state.model_copy(update={field: values}))
+        assert_error(reply, ErrorCode.INVALID_FIELD, field)
+        assert "unit quaternion" in reply.detail
