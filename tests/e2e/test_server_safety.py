@@ -355,3 +355,16 @@ def test_seq_must_be_an_integer(tight_server, seq):
         reply = peer.ask(msgpack.packb({"type": "stats", "version": 1, "seq": seq}))
         assert reply.code == ErrorCode.INVALID_FIELD and reply.field == "seq"
         assert reply.seq == -1
+
+
+def test_workers_run_linear_algebra_on_one_thread(tight_server):
+    """numpy's threaded BLAS made one SVD 375× slower on a busy 2-core machine."""
+    pids = worker_pids(tight_server)
+    assert len(pids) == 2  # one per core by default
+    for pid in pids:
+        with open(f"/proc/{pid}/environ", "rb") as environ:
+            variables = dict(
+                item.split(b"=", 1) for item in environ.read().split(b"\0") if b"=" in item
+            )
+        assert variables[b"OPENBLAS_NUM_THREADS"] == b"1"
+        assert variables[b"OMP_NUM_THREADS"] == b"1"
