@@ -26,6 +26,8 @@ from protocol.messages import Bye, Hello, Welcome
 __all__ = ["ClientLoad", "run_clients", "standing_request"]
 
 REPLY_TIMEOUT_S = 5.0
+"""A reply later than this ends the client's run (``errors["timeout"]``)."""
+HELLO_TIMEOUT_S = 30.0
 COMMAND_PREFIX = msgpack.packb("type") + msgpack.packb("command")
 ERROR_NAMES = {int(code): code.name for code in ErrorCode}
 
@@ -81,14 +83,14 @@ def _client(
     try:
         if hello is not None:
             socket.send(encode(hello))
-            if not socket.poll(int(REPLY_TIMEOUT_S * 30_000)):
+            if not socket.poll(int(HELLO_TIMEOUT_S * 1000)):
                 raise TimeoutError(f"{load.label}: no welcome")
             welcome = decode(socket.recv())
             if not isinstance(welcome, Welcome):
                 raise RuntimeError(f"{load.label}: {welcome}")
             request = standing_request(welcome)
         assert request is not None
-        start.wait()
+        start.wait(HELLO_TIMEOUT_S)
         period = 1.0 / rate_hz if rate_hz else 0.0
         begin = time.perf_counter()
         end = begin + duration_s
@@ -105,8 +107,8 @@ def _client(
             sent = time.perf_counter()
             socket.send(request)
             if not socket.poll(int(REPLY_TIMEOUT_S * 1000)):
-                load.errors["timeout"] = load.errors.get("timeout", 0) + 1
-                continue
+                load.errors["timeout"] = 1  # a late reply would be taken for the next one's
+                break
             data = socket.recv()
             # A command begins {"type": "command", …}: no need to decode the rest (the echo's
             # replies are counted as they are).
@@ -124,6 +126,9 @@ def _client(
             socket.send(encode(Bye(seq=1)))
             while socket.poll(1000) and msgpack.unpackb(socket.recv()).get("type") != "bye":
                 pass
+    except BaseException:
+        start.abort()  # the other clients stop waiting for this one
+        raise
     finally:
         socket.close(linger=0)
         context.term()

@@ -16,8 +16,10 @@ robot needs:
 - **caps** (``LIMIT_EXCEEDED``): sessions per server and per client, requests
   in flight per session, message size;
 - **identity**: a session belongs to the client's routing id *and* its CURVE
-  key (or, without CURVE, its peer address), so another peer reusing a
-  routing id does not inherit it; ``stats`` shows a client its own sessions;
+  key (or, without CURVE, its peer's IP address), so another peer reusing a
+  routing id does not inherit it, and ``stats`` shows a client its own
+  sessions. Without CURVE every client on one host is one client: the
+  per-client cap and ``stats`` count them together;
 - **expiry**: idle sessions are dropped and their memory returned.
 """
 
@@ -56,6 +58,10 @@ EXPIRY_CHECK_INTERVAL_S = 1.0
 DRAIN_S = 1.0
 """After SIGTERM, requests already received are still answered for this long."""
 WORKER_START_TIMEOUT_S = 120.0
+DEADLINE_DETAIL = (
+    "not served within the server's deadline (`poise serve --deadline`); "
+    "nothing was computed for it that can reach an actuator"
+)
 
 
 class ServerStartError(RuntimeError):
@@ -276,6 +282,9 @@ class ControllerServer:
         for worker in self.workers.values():
             for pending in worker.pending.values():
                 self._answer_late(pending, "the server is stopping")
+        for request_id, gather in list(self._gathers.items()):
+            gather.deadline_s = 0.0  # answered now, with what has come
+            self._finish_gather(request_id)
 
     def _poll_timeout_ms(self) -> int:
         soonest = time.monotonic() + POLL_INTERVAL_S
@@ -295,8 +304,11 @@ class ControllerServer:
             self._reply(identity, _error(-1, ErrorCode.MALFORMED, "", detail))
             return
         frame = frames[1]
-        client = (frame.get("User-Id") if self._curve else "") or frame.get("Peer-Address") or ""
         payload = frame.bytes
+        try:
+            client = (frame.get("User-Id") if self._curve else "") or frame.get("Peer-Address")
+        except zmq.ZMQError:  # no such property on this transport (inproc)
+            client = ""
         if len(payload) > self.config.max_message_bytes:
             self._reply(
                 identity,
@@ -316,9 +328,6 @@ class ControllerServer:
         route = self.routes.get(identity)
         if route is not None and route.client != client:
             route = None  # another peer reusing this routing id: not its session
-        elif route is not None and route.worker not in self.workers:
-            self._unroute(identity, route)  # its worker was replaced: the session is gone
-            route = None
         if kind == "hello":
             self._open(identity, client, route, seq, payload)
         elif kind == "stats":
@@ -336,6 +345,9 @@ class ControllerServer:
             refusal = self._session_cap_refusal(client)
             if refusal:
                 self._reply(identity, _error(seq, ErrorCode.LIMIT_EXCEEDED, "", refusal))
+                return
+            if not self.workers:  # stopping: a recycled worker is not replaced
+                self._reply(identity, _error(seq, ErrorCode.LIMIT_EXCEEDED, "", "stopping"))
                 return
             # Ready workers first; a replacement still warming up gets it queued.
             worker = min(
@@ -387,17 +399,21 @@ class ControllerServer:
             identity, seq, route, now + deadline_s, now + deadline_s + self.config.recycle_after_s
         )
         header = REQUEST_HEADER.pack(request_id, route.key, now + deadline_s)
-        self._to_worker([worker.identity, b"req", header, payload])
+        if not self._to_worker([worker.identity, b"req", header, payload]):
+            self._answer_late(worker.pending.pop(request_id), "its worker cannot take it now")
 
-    def _to_worker(self, frames: list[bytes]) -> None:
+    def _to_worker(self, frames: list[bytes]) -> bool:
+        """Send to a worker (held until it is ready); ``False`` if it cannot take it now."""
         worker = self.workers.get(frames[0])
         if worker is not None and not worker.ready:
             worker.backlog.append(frames)
-            return
+            return True
         try:
             self._backend.send_multipart(frames, zmq.NOBLOCK)
-        except zmq.ZMQError as exc:  # a dead worker: its requests time out, it is replaced
+        except zmq.ZMQError as exc:  # dead (it is replaced) or its queue is full
             log.warning("worker %s unreachable: %s", frames[0].decode(), exc)
+            return False
+        return True
 
     def _reply(self, identity: bytes, message: Message) -> None:
         self._send(identity, encode(message))
@@ -427,29 +443,39 @@ class ControllerServer:
             pending = worker.pending.pop(request_id, None)
             if pending is not None:
                 self._settle(pending, session_open, reply=frames[3])
-        elif kind == b"late":
-            worker.pending.pop(frames[2], None)
+        elif kind == b"late":  # the worker skipped it: past its deadline before it started
+            pending = worker.pending.pop(frames[2], None)
+            if pending is not None:
+                self._answer_late(pending, DEADLINE_DETAIL)
         elif kind == b"stats":
             self._collect_stats(worker.identity, frames[2], frames[3])
 
     def _settle(self, pending: _Pending, session_open: bool, reply: bytes) -> None:
-        route = self.routes.get(pending.identity)
-        if not session_open and route is pending.route:
-            self._unroute(pending.identity, route)
+        """Answer a worker's reply and keep the route in step with the worker's session.
+
+        The last reply of a route decides: a session the worker closed (bye,
+        refused hello) loses its route; one the worker opened for a route that
+        is gone meanwhile is dropped, so no session lives on without a route.
+        """
+        self._answer(pending, reply)
+        current = self.routes.get(pending.identity) is pending.route
+        if session_open and not current:
+            self._to_worker([pending.route.worker, b"drop", pending.route.key])
+        elif not session_open and current and pending.route.in_flight == 0:
+            self._unroute(pending.identity, pending.route)
+
+    def _answer(self, pending: _Pending, data: bytes) -> None:
+        """Send the one answer a request gets (reply or error); later ones are dropped."""
         if not pending.answered:
             pending.answered = True
             pending.route.in_flight -= 1
-            self._send(pending.identity, reply)
+            self._send(pending.identity, data)
 
     def _enforce_deadlines(self, now: float) -> None:
         for worker in list(self.workers.values()):
             for pending in worker.pending.values():
                 if not pending.answered and now > pending.deadline_s:
-                    self._answer_late(
-                        pending,
-                        "not served within the server's deadline (`poise serve --deadline`); "
-                        "nothing was computed for it that can reach an actuator",
-                    )
+                    self._answer_late(pending, DEADLINE_DETAIL)
             first = next(iter(worker.pending.values()), None)
             if first is not None and now > first.recycle_s:
                 self._recycle(worker)
@@ -465,10 +491,8 @@ class ControllerServer:
 
     def _answer_late(self, pending: _Pending, detail: str) -> None:
         if not pending.answered:
-            pending.answered = True
-            pending.route.in_flight -= 1
-            self._reply(
-                pending.identity, _error(pending.seq, ErrorCode.DEADLINE_EXCEEDED, "", detail)
+            self._answer(
+                pending, encode(_error(pending.seq, ErrorCode.DEADLINE_EXCEEDED, "", detail))
             )
 
     def _recycle(self, worker: _Worker) -> None:
@@ -485,8 +509,12 @@ class ControllerServer:
         for identity in list(worker.routes):
             route = self.routes.get(identity)
             if route is not None and route.worker == worker.identity:
-                del self.routes[identity]
+                self._unroute(identity, route)
         del self.workers[worker.identity]
+        for request_id, gather in list(self._gathers.items()):
+            if worker.identity in gather.waiting:
+                gather.waiting.discard(worker.identity)
+                self._finish_gather(request_id)
         if not self.stop_event.is_set():
             self._spawn_worker()
 
@@ -535,6 +563,10 @@ class ControllerServer:
                 )
         except ProtocolError as exc:
             self._reply(identity, _error(exc.seq, exc.code, exc.field, exc.detail))
+            return
+        if any(gather.identity == identity for gather in self._gathers.values()):
+            detail = "a stats request of this client is still being answered; wait for it"
+            self._reply(identity, _error(request.seq, ErrorCode.LIMIT_EXCEEDED, "", detail))
             return
         visible: dict[bytes, list[bytes]] = {}
         for route in self.routes.values():

@@ -50,8 +50,8 @@ class ErrorCode(IntEnum):
     LIMIT_EXCEEDED = (
         16,
         (
-            "A server cap was hit (sessions per server or client, message size, model size or "
-            "load time); the detail names the cap and its value."
+            "A server cap was hit (sessions per server or client, requests in flight per "
+            "session, message size, model size); the detail names the cap and its option."
         ),
     )
 

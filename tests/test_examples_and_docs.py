@@ -97,3 +97,15 @@ def test_benchmarks_run_and_print_ratios(script, args):
         [sys.executable, str(ROOT / "bench" / script), *args], text=True, cwd=ROOT, timeout=300
     )
     assert re.search(r"\d+\.\dx", output), output
+
+
+def test_serve_defaults_are_the_config_defaults():
+    """`poise serve`'s option defaults and ServeConfig's are one set of numbers."""
+    import dataclasses
+
+    from controller_server.cli import _serve_config
+    from controller_server.config import ServeConfig
+
+    parsed = _serve_config(build_parser().parse_args(["serve"]))
+    expected = ServeConfig(workers=parsed.workers, log_level=parsed.log_level)
+    assert dataclasses.asdict(parsed) == dataclasses.asdict(expected)

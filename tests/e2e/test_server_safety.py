@@ -368,3 +368,20 @@ def test_workers_run_linear_algebra_on_one_thread(tight_server):
             )
         assert variables[b"OPENBLAS_NUM_THREADS"] == b"1"
         assert variables[b"OMP_NUM_THREADS"] == b"1"
+
+
+def test_a_refused_hello_in_flight_with_a_good_one_leaves_the_good_session(tight_server):
+    """Two hellos sent back to back, the first refused: the session the second opened is
+    the client's (its route is not removed by the first reply, so it can also expire)."""
+    with Peer(tight_server.endpoint) as peer:
+        peer.socket.send(encode(Hello(model="no_such_robot", seq=1)))
+        peer.socket.send(encode(Hello(model="thesis_humanoid", seq=2)))
+        replies = []
+        while len(replies) < 2 and peer.socket.poll(REPLY_TIMEOUT_MS):
+            replies.append(decode(peer.socket.recv()))
+        assert [r.type for r in replies] == ["error", "welcome"]
+        reply = peer.ask(standing(replies[1], seq=3))
+        assert isinstance(reply, Command), reply
+        sessions = {s.session_id: s for s in peer.ask(Stats(seq=4)).sessions}
+        assert sessions[replies[1].session_id].ticks == 1
+        peer.ask(msgpack.packb({"type": "bye", "version": 1, "seq": 5}))
