@@ -8,13 +8,17 @@ from clients.client import (
     ServerTimeout,
 )
 from clients.layout import joint_slices, neutral_joint_position
+from clients.recording import BadLog, Recorder, read_log
 
 __all__ = [
+    "BadLog",
     "ControllerClient",
     "CurveKeys",
     "InvalidKeyFile",
+    "Recorder",
     "ServerError",
     "ServerTimeout",
     "joint_slices",
     "neutral_joint_position",
+    "read_log",
 ]

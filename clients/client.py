@@ -19,6 +19,11 @@ request.
 With :class:`CurveKeys` the connection is encrypted and authenticated with
 ZeroMQ's CURVE mechanism; a server that refuses the client's key does not
 answer at all, so that shows as a :class:`ServerTimeout`.
+
+With ``record=PATH`` every request sent and every reply received (errors and
+late replies included) is written to an MCAP log by a
+:class:`~clients.recording.Recorder` (see :mod:`clients.recording`); the
+recording never raises into the caller and is closed by :meth:`close`.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ import zmq
 import zmq.auth
 from zmq.utils import z85
 
+from clients.recording import Recorder
 from protocol.codec import decode, encode
 from protocol.errors import ErrorCode, PoiseError, ProtocolError
 from protocol.messages import (
@@ -197,9 +203,12 @@ class ControllerClient:
         timeout_s: Time to wait for each reply.
         curve: Keys to encrypt and authenticate the connection (ZeroMQ
             CURVE); ``None`` for a plain connection.
+        record: MCAP log file of the whole conversation (see
+            :mod:`clients.recording`); ``None`` records nothing.
 
     Raises:
         PoiseError: ``curve`` is given but this libzmq lacks CURVE support.
+        OSError: The ``record`` file cannot be created.
 
     Example:
         >>> with ControllerClient("tcp://127.0.0.1:5555") as client:  # doctest: +SKIP
@@ -207,12 +216,20 @@ class ControllerClient:
         ...     command = client.step(state)
     """
 
-    def __init__(self, endpoint: str, timeout_s: float = 1.0, *, curve: CurveKeys | None = None):
+    def __init__(
+        self,
+        endpoint: str,
+        timeout_s: float = 1.0,
+        *,
+        curve: CurveKeys | None = None,
+        record: str | os.PathLike[str] | None = None,
+    ):
         if curve is not None and not zmq.has("curve"):
             raise PoiseError(
                 f"libzmq {zmq.zmq_version()} was built without CURVE; "
                 "install the pyzmq wheel, which bundles libsodium"
             )
+        self.recorder = Recorder(record) if record is not None else None
         self.endpoint = endpoint
         self.timeout_s = timeout_s
         self.curve = curve
@@ -355,6 +372,8 @@ class ControllerClient:
                 pass
         self._close_socket()
         self._context.term()
+        if self.recorder is not None:
+            self.recorder.close()
 
     def _handshake(self) -> Welcome:
         if self._hello is None:
@@ -427,8 +446,11 @@ class ControllerClient:
 
     def _post(self, message: Message) -> int:
         self._seq += 1
+        message = message.model_copy(update={"seq": self._seq})
+        if self.recorder is not None:
+            self.recorder.record(message, "sent")
         try:  # a DEALER with no connected peer (a refused CURVE handshake) blocks on send
-            self._open_socket().send(encode(message.model_copy(update={"seq": self._seq})))
+            self._open_socket().send(encode(message))
         except zmq.Again:
             self._timed_out(message.type, self.timeout_s)
         return self._seq
@@ -440,6 +462,8 @@ class ControllerClient:
             if not socket.poll(max(1, int(remaining_ms)), zmq.POLLIN):
                 break
             reply = decode(socket.recv())
+            if self.recorder is not None:
+                self.recorder.record(reply, "received")
             if reply.seq != seq:
                 continue  # late reply to a request that already timed out
             if isinstance(reply, Error):

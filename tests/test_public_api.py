@@ -37,6 +37,7 @@ PACKAGES = [
     "controller_server.wire",
     "clients",
     "clients.client",
+    "clients.recording",
     "clients.sampling",
     "clients.load",
     "clients.state",
