@@ -2,9 +2,10 @@
 
 The server here is a scripted ROUTER with ``curve_server`` set and a
 ZAP authenticator (:class:`zmq.auth.thread.ThreadAuthenticator`) that allows
-the client public keys in one directory, as ``poise serve`` will.
+the client public keys in one directory, as ``poise serve`` does.
 """
 
+import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -46,9 +47,10 @@ def answer(request: Message) -> Message:
     return Error(code=ErrorCode.INVALID_PARAMS, field="params.damping", detail="scripted")
 
 
-@pytest.fixture
-def curve_server(keys: dict[str, Path]) -> Iterator[ScriptedServer]:
-    """A CURVE server that lets in only the client keys in ``allowed/``."""
+@contextlib.contextmanager
+def scripted_curve_server(keys: dict[str, Path], location: str) -> Iterator[ScriptedServer]:
+    """A CURVE server whose authenticator allows the client keys at ``location``
+    (a directory, or ``zmq.auth.CURVE_ALLOW_ANY``)."""
     public, secret = zmq.auth.load_certificate(keys["server_secret"])
 
     def configure(socket: zmq.Socket) -> None:
@@ -60,12 +62,19 @@ def curve_server(keys: dict[str, Path]) -> Iterator[ScriptedServer]:
     authenticator = ThreadAuthenticator(context)
     authenticator.start()
     try:
-        authenticator.configure_curve(domain="*", location=str(keys["allowed"]))
+        authenticator.configure_curve(domain="*", location=location)
         with ScriptedServer(answer, context=context, configure=configure) as server:
             yield server
     finally:
         authenticator.stop()
         context.term()
+
+
+@pytest.fixture
+def curve_server(keys: dict[str, Path]) -> Iterator[ScriptedServer]:
+    """A CURVE server that lets in only the client keys in ``allowed/``."""
+    with scripted_curve_server(keys, str(keys["allowed"])) as server:
+        yield server
 
 
 def test_an_allowed_client_talks_over_curve(keys, curve_server):
@@ -106,25 +115,10 @@ def test_a_plain_client_gets_no_answer_from_a_curve_server(curve_server):
 
 
 def test_an_ephemeral_key_is_enough_when_any_client_is_allowed(keys):
-    public, secret = zmq.auth.load_certificate(keys["server_secret"])
-
-    def configure(socket: zmq.Socket) -> None:
-        socket.curve_secretkey = secret
-        socket.curve_publickey = public
-        socket.curve_server = True
-
-    context = zmq.Context()
-    authenticator = ThreadAuthenticator(context)
-    authenticator.start()
-    try:
-        authenticator.configure_curve(domain="*", location=zmq.auth.CURVE_ALLOW_ANY)
-        with ScriptedServer(answer, context=context, configure=configure) as server:
-            curve = CurveKeys.from_files(keys["server_public"])
-            with ControllerClient(server.endpoint, timeout_s=2.0, curve=curve) as client:
-                assert client.connect("fake").session_id == "curve"
-    finally:
-        authenticator.stop()
-        context.term()
+    with scripted_curve_server(keys, zmq.auth.CURVE_ALLOW_ANY) as server:
+        curve = CurveKeys.from_files(keys["server_public"])
+        with ControllerClient(server.endpoint, timeout_s=2.0, curve=curve) as client:
+            assert client.connect("fake").session_id == "curve"
 
 
 def test_ephemeral_keys_are_fresh_pairs(keys):
