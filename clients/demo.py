@@ -27,6 +27,7 @@ def run_demo(
     backend: str = "reference",
     controller: str = "momentum",
     curve: CurveKeys | None = None,
+    record_dir: Path | None = None,
 ) -> int:
     """Run the push scenarios; exit code 0 if the robot stayed up in all of them, else 1."""
     if endpoint is None:
@@ -37,6 +38,7 @@ def run_demo(
         endpoint,
         overrides={"backend": backend, "controller": controller},
         curve=curve,
+        record_dir=record_dir,
     )
     print(f"report: {output_dir / 'report.json'}; plots: {', '.join(r['plot'] for r in reports)}")
     return 1 if any(r["fell"] for r in reports) else 0

@@ -136,8 +136,57 @@ def _demo(args: argparse.Namespace) -> int:
     from clients.demo import run_demo
 
     return run_demo(
-        Path(args.output), args.connect, args.backend, args.controller, curve=_curve_keys(args)
+        Path(args.output),
+        args.connect,
+        args.backend,
+        args.controller,
+        curve=_curve_keys(args),
+        record_dir=Path(args.record) if args.record else None,
     )
+
+
+def _replay(args: argparse.Namespace) -> int:
+    import json
+
+    from clients.recording import BadLog
+    from clients.replay import ReplayError, replay_log
+    from clients.sim.app import server_endpoint
+
+    params = {}
+    for assignment in args.set or []:
+        name, _, value = assignment.partition("=")
+        if not name or not _:
+            raise UsageError(f"--set {assignment!r}: write NAME=VALUE (VALUE in JSON)")
+        try:
+            params[name] = json.loads(value)
+        except json.JSONDecodeError:
+            params[name] = value  # a bare word: a text parameter
+    try:
+        with server_endpoint(args.connect) as endpoint:
+            report = replay_log(
+                args.log,
+                endpoint,
+                atol=args.atol,
+                rtol=args.rtol,
+                params=params,
+                curve=_curve_keys(args),
+            )
+    except (BadLog, ReplayError) as exc:
+        raise UsageError(str(exc)) from None
+    print(
+        f"compared {report.compared} commands; max abs error {report.max_abs_error:.3g}, "
+        f"max rel error {report.max_rel_error:.3g} (atol {args.atol:g}, rtol {args.rtol:g})"
+    )
+    if report.regression:
+        print(
+            f"REGRESSION: {report.divergent_commands} commands out of tolerance; first at seq "
+            f"{report.first_divergent_seq}: {', '.join(report.divergent_fields)}"
+        )
+    else:
+        print("replay matches the recording")
+    if args.json:
+        Path(args.json).write_text(json.dumps(report.to_json(), indent=2))
+    return 1 if report.regression else 0
 
 
 def _sim(args: argparse.Namespace) -> int:
@@ -151,7 +200,15 @@ def _sim(args: argparse.Namespace) -> int:
         overrides["controller"] = args.controller
     curve = _curve_keys(args)
     if not args.sweep_push:
-        run_scenarios(args.scenarios, Path(args.output), args.connect, overrides, curve=curve)
+        record_dir = Path(args.record) if args.record else None
+        run_scenarios(
+            args.scenarios,
+            Path(args.output),
+            args.connect,
+            overrides,
+            curve=curve,
+            record_dir=record_dir,
+        )
         return 0
     push = PushSpec(
         body=args.push_body,
@@ -177,6 +234,14 @@ def _add_client_key_options(parser: argparse.ArgumentParser) -> None:
         "--client-key",
         metavar="FILE",
         help="this client's secret key file (NAME.key_secret); default: a throwaway key pair",
+    )
+
+
+def _add_record_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--record",
+        metavar="DIR",
+        help="record each scenario's conversation with the server to DIR/<scenario>.mcap",
     )
 
 
@@ -357,6 +422,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--push-start", type=float, default=0.5, metavar="SECONDS")
     sim.add_argument("--push-duration", type=float, default=0.1, metavar="SECONDS")
     _add_client_key_options(sim)
+    _add_record_option(sim)
     sim.set_defaults(handler=_sim)
 
     demo = commands.add_parser(
@@ -391,7 +457,32 @@ def build_parser() -> argparse.ArgumentParser:
         help="use a running server at ENDPOINT instead of starting one",
     )
     _add_client_key_options(demo)
+    _add_record_option(demo)
     demo.set_defaults(handler=_demo)
+
+    replay = commands.add_parser(
+        "replay",
+        help="replay a recorded log against a server and compare every command",
+        description="Re-create the log's session from its recorded hello, send its states and "
+        "set_params in order, compare each command with the recorded one (|new - old| <= "
+        "atol + rtol |old| per entry). Exit code 1 on a regression, 2 on a log that cannot be "
+        "replayed.",
+    )
+    replay.add_argument("log", metavar="LOG", help="MCAP log (`poise sim --record DIR`)")
+    replay.add_argument(
+        "--connect", default=None, metavar="ENDPOINT", help="use a running server at ENDPOINT"
+    )
+    replay.add_argument("--atol", type=float, default=1e-9, help="absolute tolerance (1e-9)")
+    replay.add_argument("--rtol", type=float, default=1e-9, help="relative tolerance (1e-9)")
+    replay.add_argument(
+        "--set",
+        action="append",
+        metavar="NAME=VALUE",
+        help="override a parameter of the recorded hello (VALUE in JSON); repeatable",
+    )
+    replay.add_argument("--json", metavar="REPORT", help="also write the report as JSON")
+    _add_client_key_options(replay)
+    replay.set_defaults(handler=_replay)
     return parser
 
 

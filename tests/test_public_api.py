@@ -38,6 +38,7 @@ PACKAGES = [
     "clients",
     "clients.client",
     "clients.recording",
+    "clients.replay",
     "clients.sampling",
     "clients.load",
     "clients.state",

@@ -73,8 +73,13 @@ def run_scenarios(
     overrides: dict[str, Any] | None = None,
     progress: bool = True,
     curve: CurveKeys | None = None,
+    record_dir: Path | None = None,
 ) -> list[dict[str, Any]]:
-    """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table."""
+    """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table.
+
+    With ``record_dir``, each scenario's conversation with the server is
+    recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it).
+    """
     output_dir.mkdir(parents=True, exist_ok=True)
     progress = progress and sys.stderr.isatty()  # no carriage-return bars in logs
     reports = []
@@ -82,7 +87,11 @@ def run_scenarios(
         for name in names:
             scenario = load_scenario(name, **(overrides or {}))
             bar = _progress_bar(scenario.name) if progress else None
-            record = run_scenario(scenario, address, progress=bar, curve=curve)
+            log_path = None
+            if record_dir is not None:
+                record_dir.mkdir(parents=True, exist_ok=True)
+                log_path = record_dir / f"{scenario.name}.mcap"
+            record = run_scenario(scenario, address, progress=bar, curve=curve, log_path=log_path)
             if progress:
                 sys.stderr.write("\r" + " " * 70 + "\r")
             metrics = compute_metrics(record)

@@ -15,6 +15,7 @@ run stops early once the robot has fallen.
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -168,6 +169,7 @@ def run_scenario(
     progress: Any = None,
     timeout_s: float = 10.0,
     curve: CurveKeys | None = None,
+    log_path: str | os.PathLike[str] | None = None,
 ) -> RunRecord:
     """Simulate ``scenario`` against the server at ``endpoint``.
 
@@ -177,11 +179,12 @@ def run_scenario(
         progress: Optional callable ``progress(fraction)`` for a progress bar.
         timeout_s: Per-request timeout.
         curve: CURVE keys for a server that requires them.
+        log_path: MCAP file to record the conversation with the server to.
     """
     backend = make_backend(scenario)
     pushes = [push.to_push() for push in scenario.pushes]
     measured = scenario.ground_force_mode == "measured"
-    with ControllerClient(endpoint, timeout_s=timeout_s, curve=curve) as client:
+    with ControllerClient(endpoint, timeout_s=timeout_s, curve=curve, record=log_path) as client:
         welcome = client.connect(
             **hello_model(scenario.model),
             controller=scenario.controller,
