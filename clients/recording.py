@@ -242,7 +242,10 @@ class Recorder:
         self.path = Path(path)
         self.flush_interval_s = flush_interval_s
         self._file: BinaryIO = open(self.path, "wb")  # closed in close()
-        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.LZ4)
+        # zstd: a log of the thesis humanoid is 1.8× smaller than with LZ4 (JSON numbers
+        # compress poorly; measured on a 300-tick recording, 1.66 MB of JSON: LZ4
+        # 1.14 MB, zstd 0.64 MB), at about 1.5 ms of the writer thread per 0.1 s chunk.
+        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
         self._writer.start(profile="", library="poise")
         self._channels: dict[str, int] = {}
         for kind in MESSAGE_TYPES:

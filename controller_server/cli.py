@@ -145,6 +145,17 @@ def _demo(args: argparse.Namespace) -> int:
     )
 
 
+def _log_info(args: argparse.Namespace) -> int:
+    from clients.log_info import format_summary, summarize_log
+    from clients.recording import BadLog
+
+    try:
+        print(format_summary(args.log, summarize_log(args.log)))
+    except BadLog as exc:
+        raise UsageError(str(exc)) from None
+    return 0
+
+
 def _replay(args: argparse.Namespace) -> int:
     import json
 
@@ -483,6 +494,19 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_argument("--json", metavar="REPORT", help="also write the report as JSON")
     _add_client_key_options(replay)
     replay.set_defaults(handler=_replay)
+
+    log_command = commands.add_parser(
+        "log", help="inspect a recorded log", description="Inspect a recorded MCAP log."
+    )
+    log_commands = log_command.add_subparsers(dest="log_command", required=True, metavar="WHAT")
+    info = log_commands.add_parser(
+        "info",
+        help="sessions, model, controller, parameters, duration, message counts and rates",
+        description="Summarize a recorded log: sessions (model, hash, controller, parameters), "
+        "duration, messages per type and direction, states per second.",
+    )
+    info.add_argument("log", metavar="LOG")
+    info.set_defaults(handler=_log_info)
     return parser
 
 

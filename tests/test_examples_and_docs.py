@@ -39,7 +39,7 @@ def test_readme_commands_are_what_ci_runs():
     assert "poise demo" in readme
 
 
-@pytest.mark.parametrize("command", ["", "serve", "keygen", "demo", "sim", "replay"])
+@pytest.mark.parametrize("command", ["", "serve", "keygen", "demo", "sim", "replay", "log"])
 def test_cli_help_runs_and_is_in_the_readme(command):
     args = [
         sys.executable,

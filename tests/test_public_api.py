@@ -39,6 +39,7 @@ PACKAGES = [
     "clients.client",
     "clients.recording",
     "clients.replay",
+    "clients.log_info",
     "clients.sampling",
     "clients.load",
     "clients.state",

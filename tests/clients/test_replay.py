@@ -3,9 +3,11 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
+from clients.log_info import summarize_log
 from clients.recording import Recorder
 from clients.replay import ReplayError, replay_log
 from clients.sim.runner import run_scenario
@@ -84,3 +86,24 @@ def test_a_log_of_another_model_is_refused_saying_why(server, tmp_path):
         recorder.record(welcome.model_copy(update={"model_hash": "0" * 64}), "received")
     with pytest.raises(ReplayError, match=r"MODEL_MISMATCH.*recorded with"):
         replay_log(path, server.endpoint)
+
+
+FIXTURES = sorted((Path(__file__).parents[1] / "fixtures").glob("*.mcap"))
+
+
+@pytest.mark.parametrize("fixture", FIXTURES, ids=[path.stem for path in FIXTURES])
+def test_committed_fixtures_replay_clean(server, fixture):
+    """README "When replay fails": a change meant to keep behaviour keeps these passing."""
+    report = replay_log(fixture, server.endpoint)
+    states = summarize_log(fixture).counts["state sent"]
+    assert states > 0 and report.compared == states
+    assert not report.regression, report
+
+
+def test_poise_log_info_reads_the_fixtures():
+    assert len(FIXTURES) >= 2
+    for fixture in FIXTURES:
+        result = command("log", "info", str(fixture))
+        assert result.returncode == 0, result.stderr
+        assert "session 1: model thesis_humanoid" in result.stdout
+        assert "state sent" in result.stdout

@@ -1,0 +1,92 @@
+"""What a recorded log holds, for a person: ``poise log info LOG``.
+
+Sessions (one per recorded ``hello``) with their model, hash, controller and
+parameters in force at the handshake, the duration, message counts per type
+and direction, and the rate of states.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections import Counter
+from typing import Any
+
+from clients.recording import read_log
+from protocol.messages import Hello, Welcome
+
+__all__ = ["LogSummary", "SessionSummary", "format_summary", "summarize_log"]
+
+
+@dataclasses.dataclass
+class SessionSummary:
+    """One recorded session: its handshake."""
+
+    model_name: str
+    model_hash: str
+    controller: str
+    params: dict[str, Any]
+
+
+@dataclasses.dataclass
+class LogSummary:
+    """A log's contents at a glance."""
+
+    messages: int = 0
+    duration_s: float = 0.0
+    counts: Counter[str] = dataclasses.field(default_factory=Counter)
+    """``"<type> <direction>"`` → messages."""
+    sessions: list[SessionSummary] = dataclasses.field(default_factory=list)
+
+    @property
+    def state_rate_hz(self) -> float:
+        """States sent per second of log time (0 for a log shorter than one message)."""
+        states = self.counts["state sent"]
+        return states / self.duration_s if self.duration_s > 0 else 0.0
+
+
+def summarize_log(path: str | os.PathLike[str]) -> LogSummary:
+    """Read a log once and summarize it.
+
+    Raises:
+        BadLog: The file is not a readable Poise log.
+    """
+    summary = LogSummary()
+    first_ns = last_ns = None
+    awaiting_welcome = False
+    for logged in read_log(path):
+        summary.messages += 1
+        summary.counts[f"{logged.message.type} {logged.direction}"] += 1
+        first_ns = logged.time_ns if first_ns is None else first_ns
+        last_ns = logged.time_ns
+        if isinstance(logged.message, Hello) and logged.direction == "sent":
+            awaiting_welcome = True
+        elif isinstance(logged.message, Welcome) and awaiting_welcome:
+            awaiting_welcome = False
+            welcome = logged.message
+            summary.sessions.append(
+                SessionSummary(
+                    welcome.model_name, welcome.model_hash, welcome.controller, welcome.params
+                )
+            )
+    if first_ns is not None and last_ns is not None:
+        summary.duration_s = (last_ns - first_ns) * 1e-9
+    return summary
+
+
+def format_summary(path: str | os.PathLike[str], summary: LogSummary) -> str:
+    """The text ``poise log info`` prints."""
+    lines = [
+        f"{os.fspath(path)}: {summary.messages} messages over {summary.duration_s:.3f} s, "
+        f"{summary.state_rate_hz:.0f} states/s, {len(summary.sessions)} session(s)"
+    ]
+    for index, session in enumerate(summary.sessions, start=1):
+        lines.append(
+            f"session {index}: model {session.model_name} ({session.model_hash[:12]}…), "
+            f"controller {session.controller}"
+        )
+        params = ", ".join(f"{key}={value!r}" for key, value in sorted(session.params.items()))
+        lines.append(f"  parameters: {params}")
+    for key, count in sorted(summary.counts.items()):
+        lines.append(f"  {key:<20}{count:>8}")
+    return "\n".join(lines)
