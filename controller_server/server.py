@@ -43,8 +43,8 @@ import zmq
 from controller_server.config import SINGLE_THREADED_BLAS, ServeConfig
 from controller_server.session_table import SessionTable
 from controller_server.worker import REPLY_HEADER, REQUEST_HEADER
-from protocol.codec import decode, encode
-from protocol.errors import ErrorCode, ProtocolError
+from protocol.codec import encode
+from protocol.errors import ErrorCode
 from protocol.messages import Error, Message, SessionStats, Stats
 
 __all__ = ["ControllerServer", "ServerStartError"]
@@ -552,17 +552,11 @@ class ControllerServer:
         return count
 
     def _gather_stats(self, identity: bytes, client: str, payload: bytes) -> None:
-        try:
-            request = decode(payload)
-            if not isinstance(request, Stats) or request.sessions is not None:
-                raise ProtocolError(
-                    ErrorCode.UNEXPECTED_MESSAGE,
-                    "sessions",
-                    "a stats request carries no sessions",
-                    request.seq,
-                )
-        except ProtocolError as exc:
-            self._reply(identity, _error(exc.seq, exc.code, exc.field, exc.detail))
+        # The session-less table checks the request as a worker would: a valid one
+        # comes back as an empty ``stats``, anything else as the error to send.
+        request = self._local.handle(identity, payload)
+        if not isinstance(request, Stats):
+            self._reply(identity, request)
             return
         if any(gather.identity == identity for gather in self._gathers.values()):
             detail = "a stats request of this client is still being answered; wait for it"

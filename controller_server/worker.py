@@ -36,7 +36,7 @@ import msgpack
 import zmq
 
 from controller_server.config import ServeConfig
-from controller_server.session_table import SessionTable, release_free_memory
+from controller_server.session_table import SessionTable
 from protocol.codec import encode
 from protocol.errors import ErrorCode
 from protocol.messages import Error, Hello
@@ -82,8 +82,7 @@ def run_worker(identity: bytes, backend: str, config: ServeConfig) -> None:
     set_model_directories(config.model_dirs, max_file_bytes=config.max_model_bytes)
     set_model_cache_size(config.model_cache_entries)
     table = SessionTable(max_model_bytes=config.max_model_bytes)
-    _warm_up(table)
-    release_free_memory()
+    _warm_up(table)  # its drop returns the warm-up session's memory
     parent = os.getppid()
     context = zmq.Context()
     socket = context.socket(zmq.DEALER)
