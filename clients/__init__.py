@@ -8,7 +8,7 @@ from clients.client import (
     ServerTimeout,
 )
 from clients.layout import joint_slices, neutral_joint_position
-from clients.recording import BadLog, Recorder, read_log
+from protocol.recording import BadLog, Recorder, read_log
 
 __all__ = [
     "BadLog",

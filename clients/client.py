@@ -22,7 +22,7 @@ answer at all, so that shows as a :class:`ServerTimeout`.
 
 With ``record=PATH`` every request sent and every reply received (errors and
 late replies included) is written to an MCAP log by a
-:class:`~clients.recording.Recorder` (see :mod:`clients.recording`); the
+:class:`~protocol.recording.Recorder` (see :mod:`protocol.recording`); the
 recording never raises into the caller and is closed by :meth:`close`.
 """
 
@@ -41,7 +41,6 @@ import zmq
 import zmq.auth
 from zmq.utils import z85
 
-from clients.recording import Recorder
 from protocol.codec import decode, encode
 from protocol.errors import ErrorCode, PoiseError, ProtocolError
 from protocol.messages import (
@@ -58,6 +57,7 @@ from protocol.messages import (
     Stats,
     Welcome,
 )
+from protocol.recording import Recorder
 
 __all__ = [
     "ControllerClient",
@@ -204,7 +204,7 @@ class ControllerClient:
         curve: Keys to encrypt and authenticate the connection (ZeroMQ
             CURVE); ``None`` for a plain connection.
         record: MCAP log file of the whole conversation (see
-            :mod:`clients.recording`); ``None`` records nothing.
+            :mod:`protocol.recording`); ``None`` records nothing.
 
     Raises:
         PoiseError: ``curve`` is given but this libzmq lacks CURVE support.

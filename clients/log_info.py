@@ -12,8 +12,8 @@ import os
 from collections import Counter
 from typing import Any
 
-from clients.recording import read_log
 from protocol.messages import Hello, Welcome
+from protocol.recording import read_log
 
 __all__ = ["LogSummary", "SessionSummary", "format_summary", "summarize_log"]
 
@@ -59,7 +59,7 @@ def summarize_log(path: str | os.PathLike[str]) -> LogSummary:
         summary.counts[f"{logged.message.type} {logged.direction}"] += 1
         first_ns = logged.time_ns if first_ns is None else first_ns
         last_ns = logged.time_ns
-        if isinstance(logged.message, Hello) and logged.direction == "sent":
+        if isinstance(logged.message, Hello):  # sent by a client, received by a server
             awaiting_welcome = True
         elif isinstance(logged.message, Welcome) and awaiting_welcome:
             awaiting_welcome = False

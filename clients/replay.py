@@ -12,17 +12,33 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Iterable
+import time
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
 
 from clients.client import ControllerClient, CurveKeys, ServerError
-from clients.recording import LoggedMessage, read_log
 from protocol.errors import PoiseError
-from protocol.messages import Command, Error, Hello, SetParams, State, Welcome
+from protocol.messages import (
+    PROTOCOL_VERSION,
+    Command,
+    Error,
+    Hello,
+    SetParams,
+    State,
+    Welcome,
+)
+from protocol.recording import LoggedMessage, read_log
 
-__all__ = ["COMPARED_FIELDS", "ReplayError", "ReplayReport", "replay_log"]
+__all__ = [
+    "COMPARED_FIELDS",
+    "RecordedSession",
+    "ReplayError",
+    "ReplayReport",
+    "recorded_session",
+    "replay_log",
+]
 
 COMPARED_FIELDS = (
     "joint_acceleration",
@@ -47,6 +63,10 @@ class ReplayReport:
         max_abs_error: Largest absolute difference over all compared commands.
         max_rel_error: Largest ``|new − old| / |old|`` over entries with ``old ≠ 0``.
         divergent_commands: Commands with any field out of tolerance.
+        requests_sent: Recorded ``state`` and ``set_params`` requests sent again.
+        messages_read: Messages read from the log.
+        log_truncated: The log ends early (its recorder was killed); the replay
+            covers the messages before the cut.
     """
 
     compared: int = 0
@@ -55,6 +75,9 @@ class ReplayReport:
     max_abs_error: float = 0.0
     max_rel_error: float = 0.0
     divergent_commands: int = 0
+    requests_sent: int = 0
+    messages_read: int = 0
+    log_truncated: bool = False
 
     @property
     def regression(self) -> bool:
@@ -70,30 +93,56 @@ class ReplayError(PoiseError):
     """A log that cannot be replayed here: no handshake, or a server that refuses it."""
 
 
-def _recorded_conversation(
+@dataclasses.dataclass
+class RecordedSession:
+    """The first session of a log, whichever side recorded it.
+
+    Attributes:
+        hello: The request that opened it.
+        welcome: The server's answer.
+        requests: ``state`` and ``set_params`` requests in recorded order, with
+            their log times (ns).
+        replies: Recorded ``command`` or ``error`` replies by ``seq``.
+    """
+
+    hello: Hello
+    welcome: Welcome
+    requests: list[tuple[int, SetParams | State]]
+    replies: dict[int, Command | Error]
+
+
+def recorded_session(
     path: str | os.PathLike[str], messages: Iterable[LoggedMessage]
-) -> tuple[Hello, Welcome, list[SetParams | State], dict[int, Command | Error]]:
-    """The log's first session: its hello, welcome, requests and replies by ``seq``."""
+) -> RecordedSession:
+    """The log's first session, from a client's log or a server's (``poise serve --record``).
+
+    Message types say which side sent what, so the recorded ``direction`` is
+    not needed: a client log has its requests ``sent``, a server log ``received``.
+
+    Raises:
+        ReplayError: The log holds no hello answered by a welcome.
+    """
     hello: Hello | None = None
     welcome: Welcome | None = None
-    requests: list[SetParams | State] = []
+    requests: list[tuple[int, SetParams | State]] = []
     replies: dict[int, Command | Error] = {}
     for logged in messages:
         message = logged.message
-        if logged.direction == "sent":
-            if isinstance(message, Hello):
-                if hello is not None:
-                    break  # a second hello starts another session
-                hello = message
-            elif isinstance(message, SetParams | State):
-                requests.append(message)
-        elif isinstance(message, Welcome) and hello is not None and welcome is None:
-            welcome = message
+        if isinstance(message, Hello):
+            if welcome is not None:
+                break  # a second hello starts another session
+            hello = message
+        elif isinstance(message, Welcome):
+            welcome = message if hello is not None else None
+        elif welcome is None:
+            continue  # before the handshake (or a refused hello's error)
+        elif isinstance(message, SetParams | State):
+            requests.append((logged.time_ns, message))
         elif isinstance(message, Command | Error):
             replies[message.seq] = message
     if hello is None or welcome is None:
         raise ReplayError(f"{str(path)!r} holds no recorded hello and welcome: nothing to replay")
-    return hello, welcome, requests, replies
+    return RecordedSession(hello, welcome, requests, replies)
 
 
 def _compare(new: Command, old: Command, atol: float, rtol: float, report: ReplayReport) -> None:
@@ -131,11 +180,13 @@ def replay_log(
     params: dict[str, Any] | None = None,
     curve: CurveKeys | None = None,
     timeout_s: float = 10.0,
+    realtime: bool = False,
+    progress: Callable[[float], None] | None = None,
 ) -> ReplayReport:
     """Replay the first session of a log against the server at ``endpoint``.
 
     Args:
-        path: MCAP log written by :class:`~clients.recording.Recorder`.
+        path: MCAP log written by :class:`~protocol.recording.Recorder`.
         endpoint: Server to replay against.
         atol: Absolute tolerance per entry.
         rtol: Relative tolerance per entry.
@@ -143,17 +194,29 @@ def replay_log(
             what a gain change does to a recorded run).
         curve: CURVE keys for a server that requires them.
         timeout_s: Per-request timeout.
+        realtime: Send each request at its recorded time after the first
+            (default: as fast as the server answers).
+        progress: Called with the fraction of requests sent, now and then.
 
     Raises:
         BadLog: Not a log.
-        ReplayError: No recorded handshake, or the server refuses the recorded
-            hello (another model hash: the detail says which).
+        ReplayError: No recorded handshake, another protocol version, or a server
+            that refuses the recorded hello (another model hash: the detail says which).
     """
-    hello, welcome, requests, replies = _recorded_conversation(path, read_log(path))
+    reader = read_log(path)
+    recorded = recorded_session(path, reader)
+    hello = recorded.hello
+    if hello.version != PROTOCOL_VERSION:
+        raise ReplayError(
+            f"{str(path)!r} was recorded with protocol version {hello.version}; this Poise "
+            f"speaks version {PROTOCOL_VERSION}: replay it with the Poise that recorded it, "
+            'or re-record it (README, "When replay fails")'
+        )
+    report = ReplayReport(messages_read=reader.messages_read, log_truncated=reader.truncated)
     with ControllerClient(endpoint, timeout_s=timeout_s, curve=curve) as client:
         fields = hello.model_dump(exclude={"type", "version", "seq"})
         fields["params"] = {**hello.params, **(params or {})}
-        fields["expected_model_hash"] = welcome.model_hash
+        fields["expected_model_hash"] = recorded.welcome.model_hash
         try:
             client.connect(**fields)
         except ServerError as exc:
@@ -162,18 +225,37 @@ def replay_log(
                 f"{exc.detail} "
                 "(a log replays against the model it was recorded with)"
             ) from None
-        report = ReplayReport()
-        for request in requests:
-            recorded = replies.get(request.seq)
-            if isinstance(request, SetParams):
-                client.set_params(request.params)
-                continue
-            try:
-                command = client.step(request)
-            except ServerError as exc:
-                if isinstance(recorded, Error) and recorded.code == exc.code:
-                    continue  # the same refusal as recorded
-                raise
-            if isinstance(recorded, Command):
-                _compare(command, recorded, atol, rtol, report)
+        start_s = time.monotonic()
+        first_ns = recorded.requests[0][0] if recorded.requests else 0
+        for index, (time_ns, request) in enumerate(recorded.requests):
+            if realtime:
+                time.sleep(max(0.0, start_s + (time_ns - first_ns) * 1e-9 - time.monotonic()))
+            if progress is not None and index % 100 == 0:
+                progress(index / len(recorded.requests))
+            report.requests_sent += 1
+            _replay_one(client, request, recorded.replies.get(request.seq), atol, rtol, report)
+    if progress is not None:
+        progress(1.0)
     return report
+
+
+def _replay_one(
+    client: ControllerClient,
+    request: SetParams | State,
+    recorded: Command | Error | None,
+    atol: float,
+    rtol: float,
+    report: ReplayReport,
+) -> None:
+    """Send one recorded request and compare the answer with the recorded one."""
+    if isinstance(request, SetParams):
+        client.set_params(request.params)
+        return
+    try:
+        command = client.step(request)
+    except ServerError as exc:
+        if isinstance(recorded, Error) and recorded.code == exc.code:
+            return  # the same refusal as recorded
+        raise
+    if isinstance(recorded, Command):
+        _compare(command, recorded, atol, rtol, report)

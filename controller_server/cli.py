@@ -53,6 +53,7 @@ def _serve_config(args: argparse.Namespace) -> ServeConfig:
         curve_secret_key=args.curve_secret_key,
         allow_client_keys=args.allow_client_keys,
         stats_all=args.stats_all,
+        record_dir=str(Path(args.record).resolve()) if args.record else None,
         log_level=args.log_level,
     )
 
@@ -65,6 +66,8 @@ def _serve(args: argparse.Namespace) -> int:
         for directory in config.model_dirs:
             if not Path(directory).is_dir():
                 raise ValueError(f"--model-dir {directory!r} is not a directory")
+        if config.record_dir is not None:
+            _make_record_dir(Path(config.record_dir))
         server = ControllerServer(config)
     except (ValueError, ServerStartError) as exc:
         print(f"poise serve: {exc}", file=sys.stderr)
@@ -94,6 +97,15 @@ def _serve(args: argparse.Namespace) -> int:
     server.serve_forever()
     print("poise serve: stopped", flush=True)
     return 0
+
+
+def _make_record_dir(directory: Path) -> None:
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--record {str(directory)!r}: {exc.strerror or exc}") from None
+    if not os.access(directory, os.W_OK):
+        raise ValueError(f"--record {str(directory)!r} is not writable")
 
 
 def _is_loopback(endpoint: str) -> bool:
@@ -147,7 +159,7 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _log_info(args: argparse.Namespace) -> int:
     from clients.log_info import format_summary, summarize_log
-    from clients.recording import BadLog
+    from protocol.recording import BadLog
 
     try:
         print(format_summary(args.log, summarize_log(args.log)))
@@ -159,9 +171,10 @@ def _log_info(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     import json
 
-    from clients.recording import BadLog
+    from clients.progress import ProgressBar
     from clients.replay import ReplayError, replay_log
     from clients.sim.app import server_endpoint
+    from protocol.recording import BadLog
 
     params = {}
     for assignment in args.set or []:
@@ -173,7 +186,7 @@ def _replay(args: argparse.Namespace) -> int:
         except json.JSONDecodeError:
             params[name] = value  # a bare word: a text parameter
     try:
-        with server_endpoint(args.connect) as endpoint:
+        with server_endpoint(args.connect) as endpoint, ProgressBar(Path(args.log).name) as bar:
             report = replay_log(
                 args.log,
                 endpoint,
@@ -181,11 +194,19 @@ def _replay(args: argparse.Namespace) -> int:
                 rtol=args.rtol,
                 params=params,
                 curve=_curve_keys(args),
+                realtime=args.realtime,
+                progress=bar,
             )
     except (BadLog, ReplayError) as exc:
         raise UsageError(str(exc)) from None
+    if report.log_truncated:
+        print(
+            f"warning: the log ends early (its recorder was killed?): replayed the "
+            f"{report.messages_read} messages before the cut"
+        )
     print(
-        f"compared {report.compared} commands; max abs error {report.max_abs_error:.3g}, "
+        f"sent {report.requests_sent} requests, compared {report.compared} commands; "
+        f"max abs error {report.max_abs_error:.3g}, "
         f"max rel error {report.max_rel_error:.3g} (atol {args.atol:g}, rtol {args.rtol:g})"
     )
     if report.regression:
@@ -384,6 +405,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="stats lists every session (default: only the asking client's own)",
     )
+    serve.add_argument(
+        "--record",
+        metavar="DIR",
+        help="record every session's conversation to DIR/<UTC time>-<session id>.mcap "
+        "(created if missing; `poise replay` replays a file)",
+    )
     serve.set_defaults(handler=_serve)
 
     keygen = commands.add_parser(
@@ -490,6 +517,11 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         metavar="NAME=VALUE",
         help="override a parameter of the recorded hello (VALUE in JSON); repeatable",
+    )
+    replay.add_argument(
+        "--realtime",
+        action="store_true",
+        help="send each state at its recorded time (default: as fast as the server answers)",
     )
     replay.add_argument("--json", metavar="REPORT", help="also write the report as JSON")
     _add_client_key_options(replay)

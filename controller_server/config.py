@@ -59,6 +59,8 @@ class ServeConfig:
         allow_client_keys: Directory of client public keys allowed with CURVE;
             ``None``: any client key (encryption without authentication).
         stats_all: ``stats`` lists every session, not only the client's own.
+        record_dir: Directory where each session's conversation is recorded
+            (one MCAP file per session, :mod:`protocol.recording`); ``None``: none.
         log_level: Logging level of the workers.
     """
 
@@ -78,6 +80,7 @@ class ServeConfig:
     curve_secret_key: str | None = None
     allow_client_keys: str | None = None
     stats_all: bool = False
+    record_dir: str | None = None
     log_level: str = "INFO"
 
     def __post_init__(self) -> None:

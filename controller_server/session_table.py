@@ -7,6 +7,10 @@ creates (or replaces) the key's session, ``state`` → ``command``,
 ``set_params`` → ``params``, ``stats`` → ``stats``, ``bye`` closes the
 session. Which client a key belongs to, caps, deadlines and expiry are the
 broker's business (:mod:`controller_server.server`).
+
+With a ``record_dir``, every session's conversation (the requests it
+received, the replies it sent) is recorded to its own MCAP file, opened by
+its ``hello`` and closed when the session ends (:mod:`protocol.recording`).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import gc
 import logging
 import time
 from collections.abc import Iterable
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from protocol.codec import decode
@@ -25,6 +30,7 @@ from protocol.messages import Bye, Error, Hello, Message, SessionStats, SetParam
 
 if TYPE_CHECKING:
     from controller_server.session import Session
+    from protocol.recording import Recorder
 
 __all__ = ["SessionTable", "release_free_memory"]
 
@@ -60,39 +66,88 @@ class SessionTable:
 
     Args:
         max_model_bytes: Largest ``hello.model_text`` accepted (bytes of UTF-8).
+        record_dir: Record each session to ``<UTC time>-<session id>.mcap`` here.
     """
 
-    def __init__(self, max_model_bytes: int = 4 * 1024 * 1024):
+    def __init__(
+        self, max_model_bytes: int = 4 * 1024 * 1024, record_dir: str | Path | None = None
+    ):
         self.max_model_bytes = max_model_bytes
+        self.record_dir = None if record_dir is None else Path(record_dir)
         self.sessions: dict[bytes, Session] = {}
+        self.recorders: dict[bytes, Recorder] = {}
 
     def handle(self, key: bytes, payload: bytes) -> Message:
         """Answer one request for session ``key``; never raises for bad input."""
+        received_ns = time.time_ns()
+        request, reply = self._answer(key, payload)
+        recorder = self.recorders.get(key)
+        if recorder is not None:
+            if request is not None:
+                recorder.record(request, "received", received_ns)
+            recorder.record(reply, "sent")
+        if isinstance(request, Bye) and isinstance(reply, Bye):
+            self.drop([key])
+        return reply
+
+    def _answer(self, key: bytes, payload: bytes) -> tuple[Message | None, Message]:
+        """The decoded request (``None`` if it does not decode) and the reply."""
         seq = -1
+        request = None
         try:
             request = decode(payload)
             seq = request.seq
-            return self._dispatch(key, request)
+            return request, self._dispatch(key, request)
         except ProtocolError as exc:
             session = self.sessions.get(key)
             if session is not None:
                 session.errors += 1
-            return Error(
+            error = Error(
                 seq=exc.seq if exc.seq >= 0 else seq,
                 code=exc.code,
                 field=exc.field,
                 detail=exc.detail,
             )
+            return request, error
         except Exception as exc:  # a controller bug must not take the server down
             log.exception("internal error while serving a request")
-            return Error(seq=seq, code=ErrorCode.INTERNAL, detail=f"{type(exc).__name__}: {exc}")
+            error = Error(seq=seq, code=ErrorCode.INTERNAL, detail=f"{type(exc).__name__}: {exc}")
+            return request, error
 
     def drop(self, keys: Iterable[bytes]) -> int:
-        """Forget these sessions (expired, replaced, or closed elsewhere); return how many."""
-        dropped = sum(self.sessions.pop(key, None) is not None for key in keys)
+        """Forget these sessions (expired, replaced, closed) and close their logs; how many."""
+        dropped = 0
+        for key in keys:
+            dropped += self.sessions.pop(key, None) is not None
+            self._stop_recording(key)
         if dropped:
             release_free_memory()
         return dropped
+
+    def close(self) -> None:
+        """Close every session's log (the worker stops)."""
+        for key in list(self.recorders):
+            self._stop_recording(key)
+
+    def _start_recording(self, key: bytes, session: Session) -> None:
+        self._stop_recording(key)
+        if self.record_dir is None:
+            return
+        from protocol.recording import Recorder
+
+        started = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+        path = self.record_dir / f"{started}-{session.session_id[:8]}.mcap"
+        try:
+            self.recorders[key] = Recorder(path)
+        except OSError as exc:  # the session goes on unrecorded
+            log.error("cannot record session %s to %s: %s", session.session_id[:8], path, exc)
+
+    def _stop_recording(self, key: bytes) -> None:
+        recorder = self.recorders.pop(key, None)
+        if recorder is not None:
+            recorder.close()
+            if recorder.dropped:
+                log.warning("%s: %d messages were not recorded", recorder.path, recorder.dropped)
 
     def session_stats(self, keys: Iterable[bytes] | None = None) -> list[SessionStats]:
         """Counters of the given sessions (all if ``None``) that live here."""
@@ -121,6 +176,7 @@ class SessionTable:
             raise
         replaced = self.sessions.get(key)
         self.sessions[key] = session
+        self._start_recording(key, session)
         if replaced is not None:
             del replaced
             release_free_memory()
@@ -161,8 +217,7 @@ class SessionTable:
             )
         session.last_seen_s = time.monotonic()
         if isinstance(request, Bye):
-            self.drop([key])
-            return Bye(seq=request.seq)
+            return Bye(seq=request.seq)  # handle() drops the session once the bye is recorded
         try:
             if isinstance(request, State):
                 return session.step(request)

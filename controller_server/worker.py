@@ -55,7 +55,9 @@ and a client's first request is answered at once."""
 PARENT_CHECK_INTERVAL_MS = 1000
 
 
-def _warm_up(table: SessionTable) -> None:
+def _warm_up(max_model_bytes: int) -> None:
+    """Open and close one session in a table of its own (imports and model cache are global)."""
+    table = SessionTable(max_model_bytes=max_model_bytes)
     reply = table.handle(b"warm-up", encode(WARM_UP_HELLO))
     if isinstance(reply, Error):
         log.warning("warm-up failed: %s", reply.detail)
@@ -81,8 +83,8 @@ def run_worker(identity: bytes, backend: str, config: ServeConfig) -> None:
 
     set_model_directories(config.model_dirs, max_file_bytes=config.max_model_bytes)
     set_model_cache_size(config.model_cache_entries)
-    table = SessionTable(max_model_bytes=config.max_model_bytes)
-    _warm_up(table)  # its drop returns the warm-up session's memory
+    _warm_up(config.max_model_bytes)  # its drop returns the warm-up session's memory
+    table = SessionTable(max_model_bytes=config.max_model_bytes, record_dir=config.record_dir)
     parent = os.getppid()
     context = zmq.Context()
     socket = context.socket(zmq.DEALER)
@@ -111,6 +113,7 @@ def run_worker(identity: bytes, backend: str, config: ServeConfig) -> None:
             elif kind == b"stop":
                 return
     finally:
+        table.close()
         socket.close(linger=0)
         context.term()
 

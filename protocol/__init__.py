@@ -1,4 +1,4 @@
-"""The Poise wire contract: messages, msgpack codec, version and error codes."""
+"""The Poise wire contract: messages, msgpack codec, version, error codes; logs of it."""
 
 from protocol.codec import MAX_MESSAGE_BYTES, decode, encode
 from protocol.errors import ErrorCode, PoiseError, ProtocolError

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import json
-import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 from clients.client import CurveKeys
+from clients.progress import ProgressBar
 from clients.server_process import ServerProcess
 from clients.sim.metrics import compute_metrics
 from clients.sim.plots import plot_run
@@ -47,15 +47,6 @@ SWEEP_DIRECTIONS: dict[str, tuple[float, float, float]] = {
 survives a push of a given size only if it survives it from its weakest side."""
 
 
-def _progress_bar(label: str) -> Callable[[float], None]:
-    def show(fraction: float) -> None:
-        filled = int(30 * fraction)
-        sys.stderr.write(f"\r{label:<28} [{'#' * filled}{'.' * (30 - filled)}] {fraction:4.0%}")
-        sys.stderr.flush()
-
-    return show
-
-
 @contextlib.contextmanager
 def server_endpoint(endpoint: str | None) -> Iterator[str]:
     """Yield ``endpoint``, or start a `poise serve` process and yield its endpoint."""
@@ -81,19 +72,18 @@ def run_scenarios(
     recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it).
     """
     output_dir.mkdir(parents=True, exist_ok=True)
-    progress = progress and sys.stderr.isatty()  # no carriage-return bars in logs
     reports = []
     with server_endpoint(endpoint) as address:
         for name in names:
             scenario = load_scenario(name, **(overrides or {}))
-            bar = _progress_bar(scenario.name) if progress else None
             log_path = None
             if record_dir is not None:
                 record_dir.mkdir(parents=True, exist_ok=True)
                 log_path = record_dir / f"{scenario.name}.mcap"
-            record = run_scenario(scenario, address, progress=bar, curve=curve, log_path=log_path)
-            if progress:
-                sys.stderr.write("\r" + " " * 70 + "\r")
+            with ProgressBar(scenario.name, enabled=progress) as bar:
+                record = run_scenario(
+                    scenario, address, progress=bar, curve=curve, log_path=log_path
+                )
             metrics = compute_metrics(record)
             plot_path = output_dir / f"{scenario.name}.png"
             plot_run(record, plot_path)

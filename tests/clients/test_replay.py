@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 
 from clients.log_info import summarize_log
-from clients.recording import Recorder
 from clients.replay import ReplayError, replay_log
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import load_scenario
 from protocol.messages import Hello
+from protocol.recording import Recorder
 from tests.protocol.samples import sample_messages
 
 pytestmark = pytest.mark.e2e

@@ -56,6 +56,7 @@ __all__ = [
     "CHUNK_SIZE",
     "QUEUE_LIMIT",
     "BadLog",
+    "LogReader",
     "LoggedMessage",
     "Recorder",
     "encode_logged",
@@ -398,54 +399,70 @@ def _check_start(path: Path) -> None:
         raise BadLog(path, f"the MCAP magic is not followed by a header (opcode {head[8]:#x})")
 
 
-def read_log(path: str | os.PathLike[str]) -> Iterator[LoggedMessage]:
-    """Read the messages of a log in file order.
+class LogReader:
+    """The messages of a log in file order; iterate once.
 
     A log cut short (the recording process was killed, so no summary or
     footer) yields every message up to its last complete chunk, then logs a
-    warning on ``poise.record`` naming how many messages were read.
+    warning on ``poise.record`` naming how many messages were read; after the
+    iteration :attr:`truncated` says so and :attr:`messages_read` counts them.
+
+    Raises (while iterating):
+        BadLog: A message that is not a Poise message, or an MCAP file written
+            by another program.
+    """
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.messages_read = 0
+        self.truncated = False
+        self.stopped_at_byte: int | None = None
+        """Where reading stopped in a truncated log."""
+
+    def __iter__(self) -> Iterator[LoggedMessage]:
+        channels: dict[int, Channel] = {}
+        with open(self.path, "rb") as file:
+            records = StreamReader(file, validate_crcs=True).records
+            while True:
+                try:
+                    record = next(records)
+                except StopIteration:
+                    break
+                except (McapError, ValueError, EOFError, struct.error, OSError, MemoryError) as exc:
+                    self._cut_short(exc, file.tell())
+                    break
+                if isinstance(record, Header) and record.library != "poise":
+                    raise BadLog(
+                        self.path, f"written by {record.library!r}, not by a Poise recorder"
+                    )
+                if isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, McapMessage):
+                    self.messages_read += 1
+                    yield _logged(self.path, channels, record)
+
+    def _cut_short(self, exc: BaseException, offset: int) -> None:
+        self.truncated = True
+        self.stopped_at_byte = offset
+        reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+        log.warning(
+            "%s ends early (killed mid-recording?): read %d messages, stopped at byte %d (%s)",
+            self.path,
+            self.messages_read,
+            offset,
+            reason,
+        )
+
+
+def read_log(path: str | os.PathLike[str]) -> LogReader:
+    """The messages of a log, in file order (see :class:`LogReader`).
 
     Raises:
-        BadLog: The file is empty, not MCAP, or holds a message that is not a
-            Poise message (raised here for a bad start, while iterating otherwise).
+        BadLog: The file is empty, not MCAP, or does not start with an MCAP header.
     """
     file_path = Path(path)
     _check_start(file_path)
-    return _iter_log(file_path)
-
-
-def _iter_log(path: Path) -> Iterator[LoggedMessage]:
-    channels: dict[int, Channel] = {}
-    count = 0
-    complete = False
-    with open(path, "rb") as file:
-        records = StreamReader(file, validate_crcs=True).records
-        while True:
-            try:
-                record = next(records)
-            except StopIteration:
-                complete = True
-                break
-            except (McapError, ValueError, EOFError, struct.error, OSError, MemoryError) as exc:
-                reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
-                log.warning(
-                    "%s ends early (killed mid-recording?): read %d messages, "
-                    "stopped at byte %d (%s)",
-                    path,
-                    count,
-                    file.tell(),
-                    reason,
-                )
-                break
-            if isinstance(record, Header) and record.library != "poise":
-                raise BadLog(path, f"written by {record.library!r}, not by a Poise recorder")
-            if isinstance(record, Channel):
-                channels[record.id] = record
-            elif isinstance(record, McapMessage):
-                count += 1
-                yield _logged(path, channels, record)
-    if complete:
-        log.debug("%s: read %d messages", path, count)
+    return LogReader(file_path)
 
 
 def _logged(path: Path, channels: dict[int, Channel], record: McapMessage) -> LoggedMessage:

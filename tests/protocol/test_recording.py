@@ -15,9 +15,9 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from clients import ControllerClient, ServerError
-from clients.recording import BadLog, Recorder, read_log
 from protocol.errors import ErrorCode
 from protocol.messages import Command, Error, Message
+from protocol.recording import BadLog, Recorder, read_log
 from tests.helpers import random_state
 from tests.protocol.samples import sample_messages
 
@@ -172,7 +172,7 @@ def test_the_schema_refuses_what_the_message_does_not_hold(tmp_path):
 
 CHILD = """
 import sys, time
-from clients.recording import Recorder
+from protocol.recording import Recorder
 from tests.protocol.samples import sample_messages
 
 state = sample_messages()[2]
