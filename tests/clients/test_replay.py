@@ -1,32 +1,37 @@
 """Replay: a recorded simulator run against a real server is a regression test."""
 
+import contextlib
 import json
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from clients.log_info import summarize_log
 from clients.replay import ReplayError, replay_log
+from clients.server_process import ServerProcess
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import load_scenario
-from protocol.messages import Hello
-from protocol.recording import Recorder
+from protocol.messages import PROTOCOL_VERSION, Hello
+from protocol.recording import BadLog, Recorder
 from tests.protocol.samples import sample_messages
 
 pytestmark = pytest.mark.e2e
 
-TICKS = 150
+TICKS = 700
 
 
 @pytest.fixture(scope="module")
 def recorded_run(server, tmp_path_factory):
-    """`stand` for 0.15 s in the reference simulator, recorded by the client."""
-    path = tmp_path_factory.mktemp("logs") / "stand.mcap"
-    scenario = load_scenario("stand", duration_s=TICKS / 1000)
+    """`push_sequence` up to the end of its first push (0.5-0.6 s), recorded by the client."""
+    path = tmp_path_factory.mktemp("logs") / "push_sequence.mcap"
+    scenario = load_scenario("push_sequence", duration_s=TICKS / 1000)
     record = run_scenario(scenario, server.endpoint, log_path=path)
     assert not record.fell
+    assert len(record.commands) == TICKS
     return path
 
 
@@ -57,7 +62,7 @@ def command(*args):
 def test_poise_replay_exit_codes_and_report(server, recorded_run, tmp_path):
     clean = command("replay", str(recorded_run), "--connect", server.endpoint)
     assert clean.returncode == 0, clean.stderr
-    assert f"compared {TICKS} commands" in clean.stdout
+    assert f"sent {TICKS} requests, compared {TICKS} commands" in clean.stdout
     report_path = tmp_path / "report.json"
     changed = command(
         "replay", str(recorded_run), "--connect", server.endpoint,
@@ -76,6 +81,19 @@ def test_a_bad_log_is_one_line_and_exit_code_2(server, tmp_path, content):
     assert result.returncode == 2
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_a_log_of_another_protocol_version_is_refused_saying_what_to_do(server, tmp_path):
+    welcome = next(m for m in sample_messages() if m.type == "welcome")
+    path = tmp_path / "old.mcap"
+    with Recorder(path) as recorder:
+        recorder.record(Hello(seq=1, version=PROTOCOL_VERSION + 1, model="thesis_humanoid"), "sent")
+        recorder.record(welcome, "received")
+    result = command("replay", str(path), "--connect", server.endpoint)
+    assert result.returncode == 2
+    assert f"recorded with protocol version {PROTOCOL_VERSION + 1}" in result.stderr
+    assert "re-record" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
 
 
 def test_a_log_of_another_model_is_refused_saying_why(server, tmp_path):
@@ -107,3 +125,74 @@ def test_poise_log_info_reads_the_fixtures():
         assert result.returncode == 0, result.stderr
         assert "session 1: model thesis_humanoid" in result.stdout
         assert "state sent" in result.stdout
+
+
+SIGKILL_AFTER_STATES = 300
+
+
+def test_a_recording_client_killed_mid_run_leaves_a_log_that_replays_up_to_the_kill(
+    server, tmp_path
+):
+    """`poise sim --record` killed by SIGKILL: its log replays clean, with a warning."""
+    child = subprocess.Popen(
+        [
+            sys.executable, "-m", "controller_server.cli", "--log-level", "WARNING",
+            "sim", "stand", "--connect", server.endpoint,
+            "--record", str(tmp_path), "--output", str(tmp_path / "out"),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    log_path = tmp_path / "stand.mcap"
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and child.poll() is None:
+            time.sleep(0.2)  # the writer flushes every 0.1 s: count what reached the disk
+            if log_path.exists() and _states_on_disk(log_path) >= SIGKILL_AFTER_STATES:
+                break
+    finally:
+        child.kill()
+        child.wait(timeout=30)
+    assert child.returncode == -signal.SIGKILL, "the run ended before the kill"
+    summary = summarize_log(log_path)
+    states, commands = summary.counts["state sent"], summary.counts["command received"]
+    assert states >= SIGKILL_AFTER_STATES and commands >= states - 1
+
+    report = replay_log(log_path, server.endpoint)
+    assert report.log_truncated
+    assert report.requests_sent == states and report.compared == commands
+    assert not report.regression, report
+
+    result = command("replay", str(log_path), "--connect", server.endpoint)
+    assert result.returncode == 0, result.stderr
+    warning = f"the log ends early (its recorder was killed?): replayed the {report.messages_read}"
+    assert warning in result.stdout
+
+
+def _states_on_disk(path: Path) -> int:
+    with contextlib.suppress(BadLog):
+        return summarize_log(path).counts["state sent"]
+    return 0
+
+
+def test_poise_serve_record_writes_one_log_per_session_that_replays_clean(tmp_path):
+    record_dir = tmp_path / "server-logs"
+    with ServerProcess(extra_args=["--record", str(record_dir)]) as recording_server:
+        for duration_s in (0.05, 0.03):
+            scenario = load_scenario("stand", duration_s=duration_s)
+            run_scenario(scenario, recording_server.endpoint)
+    logs = sorted(record_dir.glob("*.mcap"))
+    assert len(logs) == 2, logs
+    states = sorted(summarize_log(log).counts["state received"] for log in logs)
+    assert states == [30, 50]
+    for log in logs:
+        summary = summarize_log(log)
+        assert summary.counts["hello received"] == 1 and summary.counts["welcome sent"] == 1
+        assert summary.counts["bye received"] == 1 and summary.counts["bye sent"] == 1
+        assert summary.counts["command sent"] == summary.counts["state received"]
+    # A server's log (requests received, replies sent) replays like a client's.
+    with ServerProcess() as plain_server:
+        for log in logs:
+            report = replay_log(log, plain_server.endpoint)
+            assert report.compared == summarize_log(log).counts["state received"]
+            assert not report.regression and not report.log_truncated
