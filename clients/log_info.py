@@ -1,8 +1,9 @@
-"""What a recorded log holds, for a person: ``poise log info LOG``.
+"""What a recorded log holds, for a person: ``poise log info LOG`` and ``poise log plot LOG``.
 
-Sessions (one per recorded ``hello``) with their model, hash, controller and
-parameters in force at the handshake, the duration, message counts per type
-and direction, and the rate of states.
+``info``: sessions (one per recorded ``hello``) with their model, hash,
+controller and parameters in force at the handshake, the duration, message
+counts per type and direction, and the rate of states. ``plot``: the plot the
+simulator writes for a run (:mod:`clients.sim.plots`), of the log's first session.
 """
 
 from __future__ import annotations
@@ -10,12 +11,16 @@ from __future__ import annotations
 import dataclasses
 import os
 from collections import Counter
+from pathlib import Path
 from typing import Any
 
-from protocol.messages import Hello, Welcome
-from protocol.recording import read_log
+import numpy as np
 
-__all__ = ["LogSummary", "SessionSummary", "format_summary", "summarize_log"]
+from clients.replay import recorded_session
+from protocol.messages import Command, Hello, State, Welcome
+from protocol.recording import BadLog, read_log
+
+__all__ = ["LogSummary", "SessionSummary", "format_summary", "plot_log", "summarize_log"]
 
 
 @dataclasses.dataclass
@@ -90,3 +95,38 @@ def format_summary(path: str | os.PathLike[str], summary: LogSummary) -> str:
     for key, count in sorted(summary.counts.items()):
         lines.append(f"  {key:<20}{count:>8}")
     return "\n".join(lines)
+
+
+def plot_log(path: str | os.PathLike[str], output_dir: str | os.PathLike[str]) -> Path:
+    """Plot the first session of a log to ``output_dir/<log name>.png``; return the file.
+
+    Time is each state's ``time_s``; pushes are not in a log, so none is shaded.
+
+    Raises:
+        BadLog: Not a log, or no state in it was answered by a command.
+        ReplayError: The log holds no handshake.
+    """
+    from clients.sim.plots import PlotSeries, dof_names, plot_series
+
+    session = recorded_session(path, read_log(path))
+    time_s, commands = [], []
+    for _, request in session.requests:
+        reply = session.replies.get(request.seq)
+        if isinstance(request, State) and isinstance(reply, Command):
+            time_s.append(request.time_s)
+            commands.append(reply)
+    if not commands:
+        raise BadLog(path, "no recorded state was answered by a command: nothing to plot")
+    welcome = session.welcome
+    series = PlotSeries(
+        title=f"{Path(path).name} — {welcome.controller} controller, model "
+        f"{welcome.model_name} (recorded; pushes are not logged)",
+        time_s=np.asarray(time_s),
+        commands=commands,
+        dof_names=dof_names(welcome.joints),
+    )
+    output = Path(output_dir)
+    output.mkdir(parents=True, exist_ok=True)
+    plot_path = output / f"{Path(path).stem}.png"
+    plot_series(series, plot_path)
+    return plot_path

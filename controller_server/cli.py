@@ -168,6 +168,19 @@ def _log_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _log_plot(args: argparse.Namespace) -> int:
+    from clients.log_info import plot_log
+    from clients.replay import ReplayError
+    from protocol.recording import BadLog
+
+    for log_path in args.log:
+        try:
+            print(f"{log_path}: {plot_log(log_path, args.output)}")
+        except (BadLog, ReplayError) as exc:
+            raise UsageError(str(exc)) from None
+    return 0
+
+
 def _replay(args: argparse.Namespace) -> int:
     import json
 
@@ -539,6 +552,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     info.add_argument("log", metavar="LOG")
     info.set_defaults(handler=_log_info)
+    plot = log_commands.add_parser(
+        "plot",
+        help="the simulator's PNG plot of a log's first session",
+        description="Plot the first session of each log as `poise sim` plots a run (ground "
+        "reference points, CM height, momenta, joint torques) to DIR/<log name>.png.",
+    )
+    plot.add_argument("log", metavar="LOG", nargs="+")
+    plot.add_argument(
+        "--output",
+        default="out/logs",
+        metavar="DIR",
+        help="directory for the plots (default: out/logs)",
+    )
+    plot.set_defaults(handler=_log_plot)
     return parser
 
 

@@ -1,67 +1,190 @@
-"""PNG plots of a simulated run (matplotlib, no display needed)."""
+"""PNG plots of a run, simulated or recorded (matplotlib, no display needed).
+
+One figure, four panels: the ground reference points (CM, COP, CMP) over the
+support polygon seen from above, the CM height, the momenta, and the joint
+torques (the peak and RMS over all joints, and each of the joints that peaked
+highest). Pushes are shaded and labelled with body, direction and force.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from clients.sim.runner import RunRecord
+from clients.sim.scenario import PushSpec
+from protocol.messages import Command, JointInfo
 
-__all__ = ["plot_run"]
+__all__ = ["PlotSeries", "dof_names", "plot_run", "plot_series", "series_of_run"]
+
+WORST_JOINTS = 4
+"""Joints drawn one by one in the torque panel: those of highest peak |τ|."""
+VIEW_MARGIN_M = 0.1
+"""Room around the support polygon and the CM path in the top view; COP and CMP
+points beyond it are drawn on the view's edge as open markers and counted."""
+
+
+@dataclass
+class PlotSeries:
+    """What the plot shows, from a simulator run or a recorded log.
+
+    Attributes:
+        title: The figure's title.
+        time_s: Time of each command (s).
+        commands: The commands, one per tick (some carry diagnostics).
+        dof_names: A name per ``joint_torque`` entry (:func:`dof_names`).
+        pushes: Pushes to shade (a log does not know them).
+    """
+
+    title: str
+    time_s: np.ndarray
+    commands: Sequence[Command]
+    dof_names: Sequence[str]
+    pushes: Sequence[PushSpec] = field(default_factory=tuple)
+
+
+def series_of_run(record: RunRecord) -> PlotSeries:
+    """The plot series of a simulator run."""
+    scenario = record.scenario
+    status = f"fell at {record.fall_time_s:.2f} s" if record.fell else "stayed up"
+    return PlotSeries(
+        title=f"{scenario.name} — {scenario.controller} controller, "
+        f"{scenario.backend} backend: {status}",
+        time_s=np.asarray(record.time_s),
+        commands=record.commands,
+        dof_names=dof_names(record.welcome.joints),
+        pushes=scenario.pushes,
+    )
 
 
 def plot_run(record: RunRecord, path: Path) -> None:
-    """Four panels: CM/COP/CMP over the support polygon, CM height, momenta, torques."""
+    """Plot a simulator run to ``path`` (PNG)."""
+    plot_series(series_of_run(record), path)
+
+
+def plot_series(series: PlotSeries, path: Path) -> None:
+    """Plot ``series`` to ``path`` (PNG): the four panels of the module docstring."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    time_s = np.array(record.time_s)
-    diagnostics = record.diagnostics()
-    diagnosed_time_s = time_s[record.diagnosed_ticks()]
-    com = np.array([d.position_com_in_world for d in diagnostics])
-    cop = np.array([d.center_of_pressure for d in diagnostics])
-    cmp_ = np.array([d.centroidal_moment_pivot for d in diagnostics])
-    linear = np.array([d.linear_momentum for d in diagnostics])
-    angular = np.array([d.angular_momentum for d in diagnostics])
-    torque = np.array([c.joint_torque for c in record.commands])
-
-    figure, axes = plt.subplots(2, 2, figsize=(12, 8), constrained_layout=True)
-    top = axes[0, 0]
-    polygon = diagnostics[0].support_polygon_xy.reshape(-1, 2)
-    if len(polygon) >= 3:
-        closed = np.vstack([polygon, polygon[:1]])
-        top.fill(closed[:, 0], closed[:, 1], alpha=0.15, color="grey", label="support (t = 0)")
-    top.plot(cop[:, 0], cop[:, 1], ".", ms=1.5, label="COP")
-    top.plot(cmp_[:, 0], cmp_[:, 1], ".", ms=1.5, label="CMP")
-    top.plot(com[:, 0], com[:, 1], "k-", lw=1.5, label="CM")
-    top.set(title="Ground reference points (top view)", xlabel="x (m)", ylabel="y (m)")
-    top.axis("equal")
-    top.legend(loc="best", fontsize=8)
-
-    axes[0, 1].plot(diagnosed_time_s, com[:, 2])
-    axes[0, 1].set(title="CM height", xlabel="time (s)", ylabel="m")
-    for push in record.scenario.pushes:
-        for ax in axes.flat[1:]:
-            ax.axvspan(push.start_s, push.start_s + push.duration_s, color="red", alpha=0.15)
-
-    for i, axis in enumerate("xyz"):
-        axes[1, 0].plot(diagnosed_time_s, linear[:, i], label=f"L{axis} (kg·m/s)")
-        axes[1, 0].plot(diagnosed_time_s, angular[:, i], "--", label=f"H{axis} (kg·m²/s)")
-    axes[1, 0].set(title="Momenta (red: pushes)", xlabel="time (s)")
-    axes[1, 0].legend(fontsize=7, ncol=2)
-
-    axes[1, 1].plot(time_s, np.abs(torque).max(axis=1), label="max |τ|")
-    axes[1, 1].plot(time_s, np.sqrt(np.mean(torque**2, axis=1)), label="RMS τ")
-    axes[1, 1].set(title="Joint torques", xlabel="time (s)", ylabel="N·m")
-    axes[1, 1].legend()
-
-    status = f"fell at {record.fall_time_s:.2f} s" if record.fell else "stayed up"
-    figure.suptitle(
-        f"{record.scenario.name} — {record.scenario.controller} controller, "
-        f"{record.scenario.backend} backend: {status}"
-    )
+    figure, axes = plt.subplots(2, 2, figsize=(13, 8.5), constrained_layout=True)
+    diagnosed = [i for i, command in enumerate(series.commands) if command.diagnostics is not None]
+    if diagnosed:
+        _ground_points(axes[0, 0], series, diagnosed)
+        _com_height_and_momenta(axes[0, 1], axes[1, 0], series, diagnosed)
+    else:
+        for ax in (axes[0, 0], axes[0, 1], axes[1, 0]):
+            ax.text(0.5, 0.5, "no diagnostics recorded", ha="center", transform=ax.transAxes)
+    _torques(axes[1, 1], series)
+    for ax in (axes[0, 1], axes[1, 0], axes[1, 1]):
+        _shade_pushes(ax, series.pushes)
+    figure.suptitle(series.title)
     figure.savefig(path, dpi=100)
     plt.close(figure)
+
+
+def _ground_points(ax: Any, series: PlotSeries, diagnosed: list[int]) -> None:
+    diagnostics = [series.commands[i].diagnostics for i in diagnosed]
+    com = np.array([d.position_com_in_world for d in diagnostics if d is not None])
+    cop = np.array([d.center_of_pressure for d in diagnostics if d is not None])
+    cmp_ = np.array([d.centroidal_moment_pivot for d in diagnostics if d is not None])
+    first = diagnostics[0]
+    polygon = first.support_polygon_xy.reshape(-1, 2) if first is not None else np.zeros((0, 2))
+    if len(polygon) >= 3:
+        closed = np.vstack([polygon, polygon[:1]])
+        ax.fill(closed[:, 0], closed[:, 1], alpha=0.15, color="grey", label="support (t = 0)")
+    corners = np.vstack([polygon, com[:, :2]]) if len(polygon) else com[:, :2]
+    low, high = corners.min(axis=0) - VIEW_MARGIN_M, corners.max(axis=0) + VIEW_MARGIN_M
+    for points, label, color in ((cop, "COP", "C0"), (cmp_, "CMP", "C1")):
+        finite = points[np.isfinite(points[:, :2]).all(axis=1), :2]
+        inside = np.all((finite >= low) & (finite <= high), axis=1)
+        ax.plot(*finite[inside].T, ".", ms=1.5, color=color, label=label)
+        if not inside.all():
+            edge = np.clip(finite[~inside], low, high)
+            beyond = f"{label}: {int((~inside).sum())} beyond the view (on its edge)"
+            ax.plot(*edge.T, "o", mfc="none", ms=4, color=color, label=beyond)
+    ax.plot(com[:, 0], com[:, 1], "k-", lw=1.5, label="CM (ground projection)")
+    ax.set(
+        title="Ground reference points (top view)",
+        xlabel="x (m)",
+        ylabel="y (m)",
+        xlim=(low[0], high[0]),
+        ylim=(low[1], high[1]),
+        aspect="equal",
+    )
+    ax.legend(loc="best", fontsize=7)
+
+
+def _com_height_and_momenta(
+    height_ax: Any, momenta_ax: Any, series: PlotSeries, diagnosed: list[int]
+) -> None:
+    time_s = series.time_s[diagnosed]
+    diagnostics = [series.commands[i].diagnostics for i in diagnosed]
+    com = np.array([d.position_com_in_world for d in diagnostics if d is not None])
+    linear = np.array([d.linear_momentum for d in diagnostics if d is not None])
+    angular = np.array([d.angular_momentum for d in diagnostics if d is not None])
+    height_ax.plot(time_s, com[:, 2])
+    height_ax.set(title="CM height", xlabel="time (s)", ylabel="m")
+    for i, axis in enumerate("xyz"):
+        momenta_ax.plot(time_s, linear[:, i], label=f"L{axis} (kg·m/s)")
+        momenta_ax.plot(time_s, angular[:, i], "--", label=f"H{axis} (kg·m²/s)")
+    momenta_ax.set(title="Momenta about the CM", xlabel="time (s)")
+    momenta_ax.legend(fontsize=7, ncol=2)
+
+
+def _torques(ax: Any, series: PlotSeries) -> None:
+    torque = np.array([command.joint_torque for command in series.commands])
+    ax.plot(series.time_s, np.abs(torque).max(axis=1), "k-", lw=1.2, label="max |τ| (all joints)")
+    ax.plot(series.time_s, np.sqrt(np.mean(torque**2, axis=1)), "k:", label="RMS τ")
+    names = list(series.dof_names)
+    if len(names) != torque.shape[1]:
+        names = [f"dof {i}" for i in range(torque.shape[1])]
+    worst = np.argsort(np.abs(torque).max(axis=0))[::-1][:WORST_JOINTS]
+    for dof in worst:
+        ax.plot(series.time_s, torque[:, dof], lw=0.8, label=f"τ {names[dof]}")
+    ax.set(title=f"Joint torques ({len(worst)} highest peaks)", xlabel="time (s)", ylabel="N·m")
+    ax.legend(fontsize=7)
+
+
+def dof_names(joints: Sequence[JointInfo]) -> list[str]:
+    """A name per torque entry: the joint's, or ``name x/y/z`` for a ball joint's three."""
+    names = []
+    for joint in joints:
+        if joint.nv == 1:
+            names.append(joint.name)
+        else:
+            names += [f"{joint.name} {'xyz'[i] if joint.nv == 3 else i}" for i in range(joint.nv)]
+    return names
+
+
+def _shade_pushes(ax: Any, pushes: Sequence[PushSpec]) -> None:
+    for push in pushes:
+        ax.axvspan(push.start_s, push.start_s + push.duration_s, color="red", alpha=0.15)
+    if ax.get_subplotspec().is_first_row() and ax.get_subplotspec().is_last_col():
+        for push in pushes:  # labelled once, on the CM height panel
+            force = np.asarray(push.force_in_world_N)
+            ax.annotate(
+                f"{push.body} {_direction(force)} {np.linalg.norm(force):.0f} N",
+                xy=(push.start_s, 1.0),
+                xycoords=("data", "axes fraction"),
+                rotation=90,
+                va="top",
+                ha="right",
+                fontsize=7,
+                color="darkred",
+            )
+
+
+def _direction(force: np.ndarray) -> str:
+    """``+x``, ``-y`` or ``(+0.71, +0.71, 0)`` for a push direction in world."""
+    unit = force / max(float(np.linalg.norm(force)), 1e-12)
+    axis = int(np.argmax(np.abs(unit)))
+    if abs(unit[axis]) > 0.99:
+        return f"{'+' if unit[axis] > 0 else '-'}{'xyz'[axis]}"
+    return "(" + ", ".join(f"{value:+.2f}" for value in unit) + ")"

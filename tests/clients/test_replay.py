@@ -118,6 +118,25 @@ def test_committed_fixtures_replay_clean(server, fixture):
     assert not report.regression, report
 
 
+def test_poise_log_plot_draws_the_fixtures(tmp_path):
+    result = command("log", "plot", *map(str, FIXTURES), "--output", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    for fixture in FIXTURES:
+        png = (tmp_path / f"{fixture.stem}.png").read_bytes()
+        assert png.startswith(b"\x89PNG") and len(png) > 20_000
+
+
+def test_poise_log_plot_of_a_log_without_commands_is_one_line_and_exit_code_2(tmp_path):
+    welcome = next(m for m in sample_messages() if m.type == "welcome")
+    path = tmp_path / "handshake_only.mcap"
+    with Recorder(path) as recorder:
+        recorder.record(Hello(seq=1, model="thesis_humanoid"), "sent")
+        recorder.record(welcome, "received")
+    result = command("log", "plot", str(path), "--output", str(tmp_path))
+    assert result.returncode == 2
+    assert "nothing to plot" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
 def test_poise_log_info_reads_the_fixtures():
     assert len(FIXTURES) >= 2
     for fixture in FIXTURES:
