@@ -90,13 +90,14 @@ def test_hello_client_example_runs(server):
         ("roundtrip.py", ["--count", "50"]),
         ("controller.py", ["--ticks", "30"]),
         ("load.py", ["--seconds", "1"]),
+        ("record.py", ["--blocks", "2", "--block-ticks", "50"]),
     ],
 )
 def test_benchmarks_run_and_print_ratios(script, args):
     output = subprocess.check_output(
         [sys.executable, str(ROOT / "bench" / script), *args], text=True, cwd=ROOT, timeout=300
     )
-    assert re.search(r"\d+\.\dx", output), output
+    assert re.search(r"\d+\.\d+x", output), output
 
 
 def test_serve_defaults_are_the_config_defaults():
