@@ -1,7 +1,37 @@
+"""Shared fixtures; the tests must leave the working tree as they found it."""
+
+from pathlib import Path
+
 import pytest
 
 from clients.server_process import ServerProcess
 from controller_server import files
+from tests.worktree import changes, tree_status
+
+ROOT = Path(__file__).resolve().parents[1]
+_TREE_AT_START = pytest.StashKey[frozenset[str] | None]()
+
+
+def pytest_sessionstart(session):
+    session.config.stash[_TREE_AT_START] = tree_status(ROOT)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Fail the run if it wrote into the working tree (compared with its start, not with HEAD)."""
+    before = session.config.stash.get(_TREE_AT_START, None)
+    after = tree_status(ROOT)
+    if before is None or after is None:
+        return
+    changed = changes(before, after)
+    if not changed:
+        return
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    message = "the tests changed the working tree (`git status`): " + "; ".join(changed)
+    if reporter is not None:
+        reporter.line("")
+        reporter.write_line(message, red=True, bold=True)
+    if session.exitstatus == pytest.ExitCode.OK:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 @pytest.fixture(scope="module")
