@@ -1,7 +1,9 @@
-"""The ``poise`` command line: ``poise serve``, ``poise sim`` and ``poise demo``.
+"""The ``poise`` command line: ``poise serve``, ``poise sim``, ``poise demo``, ….
 
-Later capabilities add subcommands here (``replay``, ``bridge``); each is a
-function taking the parsed arguments.
+Later capabilities add subcommands here (``bridge``); each is a function
+taking the parsed arguments. A mistake the user can fix (a scenario, an
+endpoint, no server answering) is one line on stderr and exit code 2;
+``poise --debug`` shows its traceback instead.
 """
 
 from __future__ import annotations
@@ -33,6 +35,34 @@ class UsageError(Exception):
     """A user's mistake on the command line: printed as one line, exit code 2."""
 
 
+def _as_usage_error(exc: Exception) -> UsageError | None:
+    """The one-line error for a mistake the user can fix; ``None`` for anything else (a bug).
+
+    Imports the error types only once something failed, so that a command
+    loads only what it uses.
+    """
+    if isinstance(exc, UsageError):
+        return exc
+    from clients.client import ServerTimeout
+    from clients.sim.errors import ScenarioError
+    from protocol.endpoints import InvalidEndpoint
+
+    if isinstance(exc, ScenarioError | InvalidEndpoint | ServerTimeout):
+        return UsageError(str(exc))
+    return None
+
+
+def _check_endpoint_option(option: str, endpoints: Sequence[str] | str | None) -> None:
+    """Refuse an endpoint ZeroMQ cannot use (``localhost:5555``) before anything starts."""
+    from protocol.endpoints import InvalidEndpoint, check_endpoint
+
+    for endpoint in [endpoints] if isinstance(endpoints, str) else endpoints or []:
+        try:
+            check_endpoint(endpoint)
+        except InvalidEndpoint as exc:
+            raise UsageError(f"{option} {exc}") from exc
+
+
 def _serve_config(args: argparse.Namespace) -> ServeConfig:
     from controller_server.config import ServeConfig
 
@@ -60,6 +90,7 @@ def _serve_config(args: argparse.Namespace) -> ServeConfig:
 def _serve(args: argparse.Namespace) -> int:
     from controller_server.server import ControllerServer, ServerStartError
 
+    _check_endpoint_option("--bind", args.bind)
     try:
         config = _serve_config(args)
         for directory in config.model_dirs:
@@ -135,6 +166,7 @@ def _curve_keys(args: argparse.Namespace) -> CurveKeys | None:
 def _demo(args: argparse.Namespace) -> int:
     from clients.demo import run_demo
 
+    _check_endpoint_option("--connect", args.connect)
     return run_demo(
         Path(args.output),
         args.connect,
@@ -209,10 +241,11 @@ def _sim(args: argparse.Namespace) -> int:
         overrides["backend"] = args.backend
     if args.controller:
         overrides["controller"] = args.controller
+    _check_endpoint_option("--connect", args.connect)
     curve = _curve_keys(args)
     if not args.sweep_push:
         record_dir = Path(args.record) if args.record else None
-        run_scenarios(
+        reports = run_scenarios(
             args.scenarios,
             Path(args.output),
             args.connect,
@@ -220,7 +253,7 @@ def _sim(args: argparse.Namespace) -> int:
             curve=curve,
             record_dir=record_dir,
         )
-        return 0
+        return 1 if any(report["fell"] for report in reports) else 0
     push = PushSpec(
         body=args.push_body,
         force_in_world_N=(1.0, 0.0, 0.0),
@@ -267,6 +300,11 @@ def build_parser() -> argparse.ArgumentParser:
         default="INFO",
         choices=["DEBUG", "INFO", "WARNING", "ERROR"],
         help="logging verbosity (default: INFO)",
+    )
+    parser.add_argument(
+        "--debug",
+        action="store_true",
+        help="show the traceback of an error instead of its one-line message",
     )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -511,15 +549,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``poise`` console script."""
+    """Entry point of the ``poise`` console script.
+
+    Turns a user's mistake into one line on stderr and exit code 2
+    (``--debug``: the traceback).
+    """
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(name)s %(levelname)s %(message)s"
     )
     try:
         return int(args.handler(args))
-    except UsageError as exc:
-        print(f"poise {args.command}: {exc}", file=sys.stderr)
+    except Exception as exc:
+        mistake = _as_usage_error(exc)
+        if mistake is None or args.debug:
+            raise
+        print(f"poise {args.command}: {mistake}", file=sys.stderr)
         return 2
 
 
