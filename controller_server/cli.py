@@ -3,7 +3,8 @@
 Later capabilities add subcommands here (``bridge``); each is a function
 taking the parsed arguments. A mistake the user can fix (a scenario, an
 endpoint, no server answering) is one line on stderr and exit code 2;
-``poise --debug`` shows its traceback instead.
+``poise --debug`` shows its traceback instead. The module imports nothing
+heavy, so that :func:`main` sets single-threaded BLAS before numpy loads.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from controller_server.blas import default_to_single_threaded_blas
 
 if TYPE_CHECKING:
     from clients.client import CurveKeys
@@ -621,9 +624,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``poise`` console script.
 
-    Turns a user's mistake into one line on stderr and exit code 2
-    (``--debug``: the traceback).
+    Sets single-threaded BLAS (unless the environment says otherwise) before
+    anything imports numpy; turns a user's mistake into one line on stderr
+    and exit code 2 (``--debug``: the traceback).
     """
+    default_to_single_threaded_blas()
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(name)s %(levelname)s %(message)s"

@@ -1,12 +1,16 @@
-"""Shared fixtures; the tests must leave the working tree as they found it."""
+"""Shared fixtures; BLAS on one thread; the tests must leave the tree as they found it."""
 
-from pathlib import Path
+from controller_server.blas import default_to_single_threaded_blas
 
-import pytest
+default_to_single_threaded_blas()  # before anything imports numpy (`poise` does the same)
 
-from clients.server_process import ServerProcess
-from controller_server import files
-from tests.worktree import changes, tree_status
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+from clients.server_process import ServerProcess  # noqa: E402
+from controller_server import files  # noqa: E402
+from tests.worktree import changes, tree_status  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 _TREE_AT_START = pytest.StashKey[frozenset[str] | None]()
