@@ -261,7 +261,7 @@ class ControllerClient:
         *,
         model_text: str | None = None,
         model_format: str = "mjcf",
-        controller: str = "tracking",
+        controller: str = "momentum",
         params: Mapping[str, Any] | None = None,
         contacts: list[ContactSpec] | None = None,
         expected_model_hash: str | None = None,
