@@ -498,8 +498,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim = commands.add_parser(
         "sim",
         help="run scenarios in the simulator client against a server",
-        description="Run scenarios (built-in names or TOML files) with a physics backend as a "
-        "client of `poise serve`; write a JSON report and a PNG per scenario.",
+        description="Run scenarios (built-in names, see `poise list scenarios`, or TOML files) "
+        "with a physics backend as a client of `poise serve` (started on a free loopback port "
+        "unless --connect); write DIR/report.json and DIR/<scenario>.png, print a summary. "
+        "Exit code 1 if the robot fell in any scenario.",
     )
     sim.add_argument(
         "scenarios",
@@ -507,11 +509,27 @@ def build_parser() -> argparse.ArgumentParser:
         default=["push_sequence"],
         help="scenario names or .toml paths (default: push_sequence)",
     )
-    sim.add_argument("--backend", choices=["reference", "mujoco"], help="override the backend")
-    sim.add_argument("--controller", choices=CONTROLLER_NAMES, help="override the controller")
-    sim.add_argument("--output", default="out/sim", metavar="DIR", help="report directory")
     sim.add_argument(
-        "--connect", default=None, metavar="ENDPOINT", help="use a running server at ENDPOINT"
+        "--backend",
+        choices=["reference", "mujoco"],
+        help="physics backend for every scenario (default: each scenario's own)",
+    )
+    sim.add_argument(
+        "--controller",
+        choices=CONTROLLER_NAMES,
+        help="controller for every scenario (default: each scenario's own)",
+    )
+    sim.add_argument(
+        "--output",
+        default="out/sim",
+        metavar="DIR",
+        help="directory for report.json and the plots (default: out/sim)",
+    )
+    sim.add_argument(
+        "--connect",
+        default=None,
+        metavar="ENDPOINT",
+        help="use a running server at ENDPOINT (tcp://HOST:PORT) instead of starting one",
     )
     sim.add_argument(
         "--sweep-push",
@@ -519,7 +537,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="find by bisection the largest push each thesis ablation and the prioritized "
         "controller survive, per direction (first scenario)",
     )
-    sim.add_argument("--push-body", default="chest", help="body pushed in the sweep")
+    sim.add_argument(
+        "--push-body",
+        default="chest",
+        metavar="BODY",
+        help="body pushed in the sweep (default: chest; see `poise list bodies MODEL`)",
+    )
     sim.add_argument(
         "--push-direction",
         type=float,
@@ -529,8 +552,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="push direction in world (normalised); repeat for several (default: from behind "
         "+x, from the front -x, from the side +y)",
     )
-    sim.add_argument("--push-start", type=float, default=0.5, metavar="SECONDS")
-    sim.add_argument("--push-duration", type=float, default=0.1, metavar="SECONDS")
+    sim.add_argument(
+        "--push-start",
+        type=float,
+        default=0.5,
+        metavar="SECONDS",
+        help="when the swept push starts, in simulated time (default: 0.5)",
+    )
+    sim.add_argument(
+        "--push-duration",
+        type=float,
+        default=0.1,
+        metavar="SECONDS",
+        help="how long the swept push lasts (default: 0.1)",
+    )
     _add_client_key_options(sim)
     _add_record_option(sim)
     sim.set_defaults(handler=_sim)
@@ -538,9 +573,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo = commands.add_parser(
         "demo",
         help="the thesis humanoid balancing under pushes in the simulator, with plots",
-        description="Start `poise serve` on a free loopback port, run the thesis' push scenarios "
-        "(push_sequence, head_push) in the reference simulator as its client, write "
-        "DIR/report.json and DIR/<scenario>.png, print a summary. Exit code 1 if the robot fell.",
+        description="Start `poise serve` on a free loopback port (or use --connect), run the "
+        "thesis' push scenarios (push_sequence, head_push) in the simulator (--backend) as its "
+        "client, write DIR/report.json and DIR/<scenario>.png, print a summary. Exit code 1 if "
+        "the robot fell.",
     )
     demo.add_argument(
         "--backend",
