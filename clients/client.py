@@ -42,6 +42,7 @@ import zmq.auth
 from zmq.utils import z85
 
 from protocol.codec import decode, encode
+from protocol.endpoints import check_endpoint
 from protocol.errors import ErrorCode, PoiseError, ProtocolError
 from protocol.messages import (
     Bye,
@@ -207,6 +208,7 @@ class ControllerClient:
             :mod:`protocol.recording`); ``None`` records nothing.
 
     Raises:
+        InvalidEndpoint: ``endpoint`` is not ``tcp://HOST:PORT``, ``ipc://PATH``, ….
         PoiseError: ``curve`` is given but this libzmq lacks CURVE support.
         OSError: The ``record`` file cannot be created.
 
@@ -229,8 +231,8 @@ class ControllerClient:
                 f"libzmq {zmq.zmq_version()} was built without CURVE; "
                 "install the pyzmq wheel, which bundles libsodium"
             )
+        self.endpoint = check_endpoint(endpoint)
         self.recorder = Recorder(record) if record is not None else None
-        self.endpoint = endpoint
         self.timeout_s = timeout_s
         self.curve = curve
         self.welcome: Welcome | None = None
@@ -259,7 +261,7 @@ class ControllerClient:
         *,
         model_text: str | None = None,
         model_format: str = "mjcf",
-        controller: str = "tracking",
+        controller: str = "momentum",
         params: Mapping[str, Any] | None = None,
         contacts: list[ContactSpec] | None = None,
         expected_model_hash: str | None = None,
@@ -480,9 +482,10 @@ class ControllerClient:
 
     def _timed_out(self, request_type: str, timeout_s: float) -> NoReturn:
         self._needs_reconnect = True
-        check = "check that `poise serve` is running there"
+        check = "is `poise serve` running there"
         if self.curve is not None:
-            check += ", has the server key given and accepts this client's CURVE key"
+            check += ", with the server key given, and does it accept this client's CURVE key"
         raise ServerTimeout(
-            f"no reply to {request_type!r} from {self.endpoint} within {timeout_s:.3g} s; {check}"
+            f"nothing answers at {self.endpoint}: no reply to {request_type!r} within "
+            f"{timeout_s:.3g} s; {check}?"
         )

@@ -1,7 +1,10 @@
-"""The ``poise`` command line: ``poise serve``, ``poise sim`` and ``poise demo``.
+"""The ``poise`` command line: ``poise serve``, ``poise sim``, ``poise demo``, ``poise list``, ….
 
-Later capabilities add subcommands here (``replay``, ``bridge``); each is a
-function taking the parsed arguments.
+Later capabilities add subcommands here (``bridge``); each is a function
+taking the parsed arguments. A mistake the user can fix (a scenario, an
+endpoint, no server answering) is one line on stderr and exit code 2;
+``poise --debug`` shows its traceback instead. The module imports nothing
+heavy, so that :func:`main` sets single-threaded BLAS before numpy loads.
 """
 
 from __future__ import annotations
@@ -14,6 +17,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from controller_server.blas import default_to_single_threaded_blas
 
 if TYPE_CHECKING:
     from clients.client import CurveKeys
@@ -31,6 +36,34 @@ listed here so that the CLI starts without importing them (a test keeps the two 
 
 class UsageError(Exception):
     """A user's mistake on the command line: printed as one line, exit code 2."""
+
+
+def _as_usage_error(exc: Exception) -> UsageError | None:
+    """The one-line error for a mistake the user can fix; ``None`` for anything else (a bug).
+
+    Imports the error types only once something failed, so that a command
+    loads only what it uses.
+    """
+    if isinstance(exc, UsageError):
+        return exc
+    from clients.client import ServerTimeout
+    from clients.sim.errors import ScenarioError
+    from protocol.endpoints import InvalidEndpoint
+
+    if isinstance(exc, ScenarioError | InvalidEndpoint | ServerTimeout):
+        return UsageError(str(exc))
+    return None
+
+
+def _check_endpoint_option(option: str, endpoints: Sequence[str] | str | None) -> None:
+    """Refuse an endpoint ZeroMQ cannot use (``localhost:5555``) before anything starts."""
+    from protocol.endpoints import InvalidEndpoint, check_endpoint
+
+    for endpoint in [endpoints] if isinstance(endpoints, str) else endpoints or []:
+        try:
+            check_endpoint(endpoint)
+        except InvalidEndpoint as exc:
+            raise UsageError(f"{option} {exc}") from exc
 
 
 def _serve_config(args: argparse.Namespace) -> ServeConfig:
@@ -61,6 +94,7 @@ def _serve_config(args: argparse.Namespace) -> ServeConfig:
 def _serve(args: argparse.Namespace) -> int:
     from controller_server.server import ControllerServer, ServerStartError
 
+    _check_endpoint_option("--bind", args.bind)
     try:
         config = _serve_config(args)
         for directory in config.model_dirs:
@@ -147,6 +181,7 @@ def _curve_keys(args: argparse.Namespace) -> CurveKeys | None:
 def _demo(args: argparse.Namespace) -> int:
     from clients.demo import run_demo
 
+    _check_endpoint_option("--connect", args.connect)
     return run_demo(
         Path(args.output),
         args.connect,
@@ -243,10 +278,11 @@ def _sim(args: argparse.Namespace) -> int:
         overrides["backend"] = args.backend
     if args.controller:
         overrides["controller"] = args.controller
+    _check_endpoint_option("--connect", args.connect)
     curve = _curve_keys(args)
     if not args.sweep_push:
         record_dir = Path(args.record) if args.record else None
-        run_scenarios(
+        reports = run_scenarios(
             args.scenarios,
             Path(args.output),
             args.connect,
@@ -254,7 +290,7 @@ def _sim(args: argparse.Namespace) -> int:
             curve=curve,
             record_dir=record_dir,
         )
-        return 0
+        return 1 if any(report["fell"] for report in reports) else 0
     push = PushSpec(
         body=args.push_body,
         force_in_world_N=(1.0, 0.0, 0.0),
@@ -267,6 +303,64 @@ def _sim(args: argparse.Namespace) -> int:
     with server_endpoint(args.connect) as endpoint:
         sweep_controllers(args.scenarios[0], push, directions, endpoint, overrides, curve=curve)
     return 0
+
+
+LIST_WHAT = ["scenarios", "models", "controllers", "joints", "bodies"]
+"""What ``poise list`` lists; ``joints`` and ``bodies`` of one model."""
+
+
+def _list(args: argparse.Namespace) -> int:
+    """Print one line per item: scenarios, models, controllers, or a model's joints or bodies."""
+    if args.what in ("joints", "bodies") and args.model is None:
+        raise UsageError(f"name the model: poise list {args.what} MODEL (poise list models)")
+    if args.what not in ("joints", "bodies") and args.model is not None:
+        raise UsageError(f"poise list {args.what} takes no MODEL")
+    for line in _list_lines(args.what, args.model):
+        print(line)
+    return 0
+
+
+def _list_lines(what: str, model: str | None) -> list[str]:
+    if what == "scenarios":
+        from clients.sim.scenario import builtin_scenario_names, load_scenario
+
+        lines = []
+        for name in builtin_scenario_names():
+            description = " ".join(load_scenario(name).description.split())
+            if len(description) > 80:
+                description = description[:79] + "…"
+            lines.append(f"{name:<26}{description}".rstrip())
+        return lines
+    if what == "models":
+        from clients.sim.model_file import builtin_model_names
+
+        return builtin_model_names()
+    if what == "controllers":
+        return [f"{name}{'  (default)' if name == 'momentum' else ''}" for name in CONTROLLER_NAMES]
+    from clients.sim.model_file import body_names, resolve_model_path
+
+    try:
+        path = resolve_model_path(str(model))
+    except FileNotFoundError as exc:
+        raise UsageError(str(exc)) from exc
+    if what == "bodies":
+        return body_names(path)
+    from controller_server.errors import ModelError
+    from controller_server.models import load_robot_model
+
+    try:
+        robot = load_robot_model(
+            model_text=path.read_text(),
+            model_format="urdf" if path.suffix.lower() == ".urdf" else "mjcf",
+        )
+    except ModelError as exc:
+        raise UsageError(f"{model}: {exc}") from exc
+    # One line per joint in wire order, with what initial_joint_position takes for it.
+    return [
+        f"{joint.name:<26}{joint.kind:<11}"
+        + ("4 numbers, a quaternion [x, y, z, w]" if joint.kind == "ball" else f"{joint.nq} number")
+        for joint in robot.joints
+    ]
 
 
 def _add_client_key_options(parser: argparse.ArgumentParser) -> None:
@@ -301,6 +395,11 @@ def build_parser() -> argparse.ArgumentParser:
         default="INFO",
         choices=["DEBUG", "INFO", "WARNING", "ERROR"],
         help="logging verbosity (default: INFO)",
+    )
+    parser.add_argument(
+        "--debug",
+        action="store_true",
+        help="show the traceback of an error instead of its one-line message",
     )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -439,8 +538,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim = commands.add_parser(
         "sim",
         help="run scenarios in the simulator client against a server",
-        description="Run scenarios (built-in names or TOML files) with a physics backend as a "
-        "client of `poise serve`; write a JSON report and a PNG per scenario.",
+        description="Run scenarios (built-in names, see `poise list scenarios`, or TOML files) "
+        "with a physics backend as a client of `poise serve` (started on a free loopback port "
+        "unless --connect); write DIR/report.json and DIR/<scenario>.png, print a summary. "
+        "Exit code 1 if the robot fell in any scenario.",
     )
     sim.add_argument(
         "scenarios",
@@ -448,11 +549,27 @@ def build_parser() -> argparse.ArgumentParser:
         default=["push_sequence"],
         help="scenario names or .toml paths (default: push_sequence)",
     )
-    sim.add_argument("--backend", choices=["reference", "mujoco"], help="override the backend")
-    sim.add_argument("--controller", choices=CONTROLLER_NAMES, help="override the controller")
-    sim.add_argument("--output", default="out/sim", metavar="DIR", help="report directory")
     sim.add_argument(
-        "--connect", default=None, metavar="ENDPOINT", help="use a running server at ENDPOINT"
+        "--backend",
+        choices=["reference", "mujoco"],
+        help="physics backend for every scenario (default: each scenario's own)",
+    )
+    sim.add_argument(
+        "--controller",
+        choices=CONTROLLER_NAMES,
+        help="controller for every scenario (default: each scenario's own)",
+    )
+    sim.add_argument(
+        "--output",
+        default="out/sim",
+        metavar="DIR",
+        help="directory for report.json and the plots (default: out/sim)",
+    )
+    sim.add_argument(
+        "--connect",
+        default=None,
+        metavar="ENDPOINT",
+        help="use a running server at ENDPOINT (tcp://HOST:PORT) instead of starting one",
     )
     sim.add_argument(
         "--sweep-push",
@@ -460,7 +577,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="find by bisection the largest push each thesis ablation and the prioritized "
         "controller survive, per direction (first scenario)",
     )
-    sim.add_argument("--push-body", default="chest", help="body pushed in the sweep")
+    sim.add_argument(
+        "--push-body",
+        default="chest",
+        metavar="BODY",
+        help="body pushed in the sweep (default: chest; see `poise list bodies MODEL`)",
+    )
     sim.add_argument(
         "--push-direction",
         type=float,
@@ -470,8 +592,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="push direction in world (normalised); repeat for several (default: from behind "
         "+x, from the front -x, from the side +y)",
     )
-    sim.add_argument("--push-start", type=float, default=0.5, metavar="SECONDS")
-    sim.add_argument("--push-duration", type=float, default=0.1, metavar="SECONDS")
+    sim.add_argument(
+        "--push-start",
+        type=float,
+        default=0.5,
+        metavar="SECONDS",
+        help="when the swept push starts, in simulated time (default: 0.5)",
+    )
+    sim.add_argument(
+        "--push-duration",
+        type=float,
+        default=0.1,
+        metavar="SECONDS",
+        help="how long the swept push lasts (default: 0.1)",
+    )
     _add_client_key_options(sim)
     _add_record_option(sim)
     sim.set_defaults(handler=_sim)
@@ -479,9 +613,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo = commands.add_parser(
         "demo",
         help="the thesis humanoid balancing under pushes in the simulator, with plots",
-        description="Start `poise serve` on a free loopback port, run the thesis' push scenarios "
-        "(push_sequence, head_push) in the reference simulator as its client, write "
-        "DIR/report.json and DIR/<scenario>.png, print a summary. Exit code 1 if the robot fell.",
+        description="Start `poise serve` on a free loopback port (or use --connect), run the "
+        "thesis' push scenarios (push_sequence, head_push) in the simulator (--backend) as its "
+        "client, write DIR/report.json and DIR/<scenario>.png, print a summary. Exit code 1 if "
+        "the robot fell.",
     )
     demo.add_argument(
         "--backend",
@@ -566,19 +701,40 @@ def build_parser() -> argparse.ArgumentParser:
         help="directory for the plots (default: out/logs)",
     )
     plot.set_defaults(handler=_log_plot)
+
+    listing = commands.add_parser(
+        "list",
+        help="list built-in scenarios, models, controllers, or a model's joints or bodies",
+        description="Print one line per item: the built-in scenarios (with their description), "
+        "models and controllers; the joints of MODEL in wire order (with the numbers "
+        "initial_joint_position takes for each), or the bodies of MODEL (what a push may name). "
+        "MODEL is a built-in name or an .xml/.urdf file.",
+    )
+    listing.add_argument("what", choices=LIST_WHAT, metavar="{" + ",".join(LIST_WHAT) + "}")
+    listing.add_argument("model", nargs="?", metavar="MODEL", help="for joints and bodies")
+    listing.set_defaults(handler=_list)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``poise`` console script."""
+    """Entry point of the ``poise`` console script.
+
+    Sets single-threaded BLAS (unless the environment says otherwise) before
+    anything imports numpy; turns a user's mistake into one line on stderr
+    and exit code 2 (``--debug``: the traceback).
+    """
+    default_to_single_threaded_blas()
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(name)s %(levelname)s %(message)s"
     )
     try:
         return int(args.handler(args))
-    except UsageError as exc:
-        print(f"poise {args.command}: {exc}", file=sys.stderr)
+    except Exception as exc:
+        mistake = _as_usage_error(exc)
+        if mistake is None or args.debug:
+            raise
+        print(f"poise {args.command}: {mistake}", file=sys.stderr)
         return 2
 
 

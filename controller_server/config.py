@@ -10,23 +10,15 @@ import dataclasses
 import json
 from dataclasses import dataclass
 
+from controller_server.blas import BLAS_THREAD_VARIABLES
 from protocol.codec import MAX_MESSAGE_BYTES
 
 __all__ = ["SINGLE_THREADED_BLAS", "ServeConfig"]
 
-SINGLE_THREADED_BLAS = {
-    "OMP_NUM_THREADS": "1",
-    "OPENBLAS_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-    "BLIS_NUM_THREADS": "1",
-    "VECLIB_MAXIMUM_THREADS": "1",
-    "NUMEXPR_NUM_THREADS": "1",
-}
-"""Environment of worker processes: linear algebra on one thread each.
-
-numpy's multithreaded BLAS made one 38 × 102 SVD take 321 ms instead of
-0.85 ms on a shared 2-core machine; the workers are the parallelism.
-"""
+SINGLE_THREADED_BLAS = BLAS_THREAD_VARIABLES
+"""Environment of worker processes: linear algebra on one thread each, whatever the
+user set for ``poise`` itself. numpy's multithreaded BLAS made one 38 × 102 SVD take
+321 ms instead of 0.85 ms on a shared 2-core machine; the workers are the parallelism."""
 
 
 @dataclass(frozen=True)

@@ -177,7 +177,13 @@ class ControllerServer:
                 self.bound_endpoints.append(self._frontend.getsockopt_string(zmq.LAST_ENDPOINT))
         except zmq.ZMQError as exc:
             self.close()
-            raise ServerStartError(f"cannot bind {endpoint!r}: {exc}") from None
+            hint = ""
+            if exc.errno == zmq.EADDRINUSE:
+                hint = (
+                    "; another process (another `poise serve`?) listens there: stop it, or "
+                    "bind another port (port * picks a free one)"
+                )
+            raise ServerStartError(f"cannot bind {endpoint!r}: {exc}{hint}") from None
 
     # ----------------------------------------------------------------- set-up
 

@@ -1,6 +1,7 @@
 """The Poise wire contract: messages, msgpack codec, version, error codes; logs of it."""
 
 from protocol.codec import MAX_MESSAGE_BYTES, decode, encode
+from protocol.endpoints import InvalidEndpoint, check_endpoint
 from protocol.errors import ErrorCode, PoiseError, ProtocolError
 from protocol.messages import (
     MESSAGE_TYPES,
@@ -33,6 +34,7 @@ __all__ = [
     "Error",
     "ErrorCode",
     "Hello",
+    "InvalidEndpoint",
     "JointInfo",
     "Message",
     "Params",
@@ -44,6 +46,7 @@ __all__ = [
     "State",
     "Stats",
     "Welcome",
+    "check_endpoint",
     "decode",
     "encode",
 ]

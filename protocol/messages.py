@@ -138,7 +138,11 @@ class Hello(Message):
         "Contact definitions (see ContactSpec); default: every `*_sole` box site of an MJCF.",
         default=None,
     )
-    controller: str = wire_field("Controller name (`tracking`).", default="tracking")
+    controller: str = wire_field(
+        "Controller: `momentum` (default; Macchietto 2008, every objective), `prioritized` "
+        "(de Lasa 2010) or `tracking` (tracking only, the ablation baseline).",
+        default="momentum",
+    )
     params: dict[str, ParamValue] = wire_field(
         "Initial controller parameters (see the parameter table).", default_factory=dict
     )

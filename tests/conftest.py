@@ -1,7 +1,41 @@
-import pytest
+"""Shared fixtures; BLAS on one thread; the tests must leave the tree as they found it."""
 
-from clients.server_process import ServerProcess
-from controller_server import files
+from controller_server.blas import default_to_single_threaded_blas
+
+default_to_single_threaded_blas()  # before anything imports numpy (`poise` does the same)
+
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+from clients.server_process import ServerProcess  # noqa: E402
+from controller_server import files  # noqa: E402
+from tests.worktree import changes, tree_status  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+_TREE_AT_START = pytest.StashKey[frozenset[str] | None]()
+
+
+def pytest_sessionstart(session):
+    session.config.stash[_TREE_AT_START] = tree_status(ROOT)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Fail the run if it wrote into the working tree (compared with its start, not with HEAD)."""
+    before = session.config.stash.get(_TREE_AT_START, None)
+    after = tree_status(ROOT)
+    if before is None or after is None:
+        return
+    changed = changes(before, after)
+    if not changed:
+        return
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    message = "the tests changed the working tree (`git status`): " + "; ".join(changed)
+    if reporter is not None:
+        reporter.line("")
+        reporter.write_line(message, red=True, bold=True)
+    if session.exitstatus == pytest.ExitCode.OK:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 @pytest.fixture(scope="module")

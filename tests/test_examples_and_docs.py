@@ -39,7 +39,7 @@ def test_readme_commands_are_what_ci_runs():
     assert "poise demo" in readme
 
 
-@pytest.mark.parametrize("command", ["", "serve", "keygen", "demo", "sim", "replay", "log"])
+@pytest.mark.parametrize("command", ["", "serve", "keygen", "demo", "sim", "replay", "log", "list"])
 def test_cli_help_runs_and_is_in_the_readme(command):
     args = [
         sys.executable,
@@ -110,3 +110,69 @@ def test_serve_defaults_are_the_config_defaults():
     parsed = _serve_config(build_parser().parse_args(["serve"]))
     expected = ServeConfig(workers=parsed.workers, log_level=parsed.log_level)
     assert dataclasses.asdict(parsed) == dataclasses.asdict(expected)
+
+
+def _options(parser, command=("poise",)):
+    """(command, action) for every option of ``parser`` and its subcommands."""
+    import argparse
+
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, subparser in action.choices.items():
+                yield from _options(subparser, (*command, name))
+        elif action.option_strings and action.dest != "help":
+            yield " ".join(command), action
+
+
+def test_every_option_says_what_it_does():
+    missing = [f"{c} {a.option_strings[0]}" for c, a in _options(build_parser()) if not a.help]
+    assert missing == []
+
+
+def test_sim_and_demo_options_state_their_defaults():
+    unstated = [
+        f"{command} {action.option_strings[0]}"
+        for command, action in _options(build_parser())
+        if command in ("poise sim", "poise demo")
+        and action.default not in (None, False)
+        and f"default: {action.default}" not in action.help
+    ]
+    assert unstated == []
+
+
+def test_demo_help_names_the_backend_choice():
+    demo_help = subprocess.check_output(
+        [sys.executable, "-m", "controller_server.cli", "demo", "--help"], text=True, cwd=ROOT
+    )
+    assert "reference simulator" not in demo_help
+    assert "--backend {reference,mujoco}" in demo_help
+
+
+def quick_start_snippet() -> str:
+    """The Python block of the README's Quick start."""
+    readme = (ROOT / "README.md").read_text()
+    section = readme.split("\n## Quick start\n", 1)[1].split("\n## ", 1)[0]
+    return re.search(r"```python\n(.*?)```", section, re.DOTALL).group(1)
+
+
+@pytest.mark.e2e
+def test_readme_quick_start_snippet_runs(server, tmp_path):
+    snippet = quick_start_snippet()
+    assert "tcp://127.0.0.1:5555" in snippet
+    script = tmp_path / "quick_start.py"
+    script.write_text(snippet.replace("tcp://127.0.0.1:5555", server.endpoint))
+    output = subprocess.check_output(
+        [sys.executable, str(script)], text=True, cwd=tmp_path, timeout=120
+    )
+    torques = [float(x) for x in re.findall(r"-?\d+\.\d*(?:e[-+]\d+)?", output)]
+    assert len(torques) >= 20, output  # 39 joint torques of the thesis humanoid
+
+
+@pytest.mark.e2e
+def test_hello_picks_the_momentum_controller_by_default(server):
+    from clients import ControllerClient
+    from protocol import Hello
+
+    assert Hello(model="thesis_humanoid").controller == "momentum"
+    with ControllerClient(server.endpoint, timeout_s=10.0) as client:
+        assert client.connect("thesis_humanoid").controller == "momentum"

@@ -68,14 +68,18 @@ def run_scenarios(
 ) -> list[dict[str, Any]]:
     """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table.
 
+    Raises:
+        ScenarioError: A scenario cannot run (checked for all before the first runs).
+
     With ``record_dir``, each scenario's conversation with the server is
     recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it).
     """
+    # Every scenario is checked before a server starts or a file is written.
+    scenarios = [load_scenario(name, **(overrides or {})) for name in names]
     output_dir.mkdir(parents=True, exist_ok=True)
     reports = []
     with server_endpoint(endpoint) as address:
-        for name in names:
-            scenario = load_scenario(name, **(overrides or {}))
+        for scenario in scenarios:
             log_path = None
             if record_dir is not None:
                 record_dir.mkdir(parents=True, exist_ok=True)

@@ -4,7 +4,15 @@ from __future__ import annotations
 
 from protocol.errors import PoiseError
 
-__all__ = ["SimulationDiverged", "UnsupportedModel"]
+__all__ = ["ScenarioError", "ScenarioNotFound", "SimulationDiverged", "UnsupportedModel"]
+
+
+class ScenarioError(PoiseError, ValueError):
+    """A scenario a user wrote cannot run; the one-line message says what to change."""
+
+
+class ScenarioNotFound(ScenarioError, FileNotFoundError):
+    """No built-in scenario of that name and no such file; the message lists the built-ins."""
 
 
 class UnsupportedModel(PoiseError, ValueError):

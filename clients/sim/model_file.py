@@ -16,24 +16,54 @@ from typing import Any
 
 from clients.sim.backend import ContactPoint
 
-__all__ = ["builtin_model_path", "hello_model", "resolve_model_path", "sole_contact_points"]
+__all__ = [
+    "body_names",
+    "builtin_model_names",
+    "builtin_model_path",
+    "hello_model",
+    "resolve_model_path",
+    "sole_contact_points",
+]
+
+
+def _builtin_model_dir() -> Path:
+    spec = importlib.util.find_spec("controller_server")
+    if spec is None or not spec.submodule_search_locations:
+        raise FileNotFoundError("the controller_server package is not installed")
+    return Path(next(iter(spec.submodule_search_locations))) / "models" / "data"
+
+
+def builtin_model_names() -> list[str]:
+    """Names of the built-in models, sorted."""
+    return sorted(path.stem for path in _builtin_model_dir().glob("*.xml"))
 
 
 def builtin_model_path(name: str) -> Path:
     """Path of a built-in MJCF model, e.g. ``thesis_humanoid``."""
-    spec = importlib.util.find_spec("controller_server")
-    if spec is None or not spec.submodule_search_locations:
-        raise FileNotFoundError("the controller_server package is not installed")
-    path = Path(next(iter(spec.submodule_search_locations))) / "models" / "data" / f"{name}.xml"
+    path = _builtin_model_dir() / f"{name}.xml"
     if not path.is_file():
-        raise FileNotFoundError(f"no built-in model {name!r} (looked for {path})")
+        raise FileNotFoundError(
+            f"no built-in model {name!r}; built in: {', '.join(builtin_model_names())} "
+            "(or give the path of an .xml or .urdf file)"
+        )
     return path
 
 
 def resolve_model_path(model: str) -> Path:
-    """A built-in name or a file path."""
+    """A built-in name or a file path (one with a suffix, e.g. ``robot.xml``).
+
+    Raises:
+        FileNotFoundError: No such file, or no built-in of that name; the
+            message says which, and lists the built-ins.
+    """
     path = Path(model)
-    return path if path.suffix and path.is_file() else builtin_model_path(model)
+    if not path.suffix:
+        return builtin_model_path(model)
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"model file {model!r} does not exist (relative paths start from {Path.cwd()})"
+        )
+    return path
 
 
 def hello_model(model: str) -> dict[str, Any]:
@@ -49,6 +79,14 @@ def hello_model(model: str) -> dict[str, Any]:
         "model_text": path.read_text(),
         "model_format": "urdf" if path.suffix == ".urdf" else "mjcf",
     }
+
+
+def body_names(path: Path) -> list[str]:
+    """Names of the MJCF bodies (what a push may name), in document order."""
+    worldbody = ET.parse(path).getroot().find("worldbody")
+    if worldbody is None:
+        return []
+    return [name for body in worldbody.iter("body") if (name := body.get("name"))]
 
 
 def sole_contact_points(path: Path) -> list[ContactPoint]:

@@ -99,6 +99,21 @@ _DIVERGENCE_WARNINGS = tuple(
 )
 
 
+def _no_log_file() -> None:
+    """Keep MuJoCo's warnings on the console only, out of ``MUJOCO_LOG.TXT``.
+
+    MuJoCo appends every warning (e.g. a diverging state) to ``MUJOCO_LOG.TXT``
+    in the current directory, which litters whatever directory a run starts
+    in; the backend reports divergence itself (:class:`SimulationDiverged`).
+    """
+    config = mujoco.MjLogConfig.get()
+    config.logto_file = False
+    config.set()
+
+
+_no_log_file()
+
+
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise cross product of ``(n, 3)`` arrays (``np.cross`` is slow on small ones)."""
     return np.stack(

@@ -15,6 +15,7 @@ run stops early once the robot has fallen.
 
 from __future__ import annotations
 
+import difflib
 import os
 import time
 from dataclasses import dataclass, field
@@ -26,6 +27,7 @@ import pinocchio as pin
 from clients.client import ControllerClient, CurveKeys, ServerError
 from clients.layout import joint_slices, neutral_joint_position
 from clients.sim.backend import PhysicsBackend, Push
+from clients.sim.errors import ScenarioError
 from clients.sim.model_file import hello_model, resolve_model_path
 from clients.sim.scenario import Scenario
 from clients.state import RobotState
@@ -65,13 +67,30 @@ def make_backend(scenario: Scenario) -> PhysicsBackend:
 
 
 def standing_state(welcome: Welcome, joint_overrides: dict[str, list[float]]) -> RobotState:
-    """Neutral pose (with overrides) at the standing height, at rest."""
+    """Neutral pose (with overrides) at the standing height, at rest.
+
+    Raises:
+        ScenarioError: An override names a joint the robot lacks (the message
+            suggests the closest and lists them all) or has the wrong length.
+    """
     joints = list(welcome.joints)
     position = neutral_joint_position(joints)
     slices = joint_slices(joints)
     for name, value in joint_overrides.items():
         if name not in slices:
-            raise ValueError(f"initial_joint_position: unknown joint {name!r}")
+            close = difflib.get_close_matches(name, slices, n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise ScenarioError(
+                f"initial_joint_position: {welcome.model_name} has no joint {name!r}; "
+                f"{hint}joints: {', '.join(slices)}"
+            )
+        joint = next(j for j in joints if j.name == name)
+        if len(value) != joint.nq:
+            example = "[x, y, z, w] (a quaternion)" if joint.kind == "ball" else "[0.3]"
+            raise ScenarioError(
+                f"initial_joint_position.{name} = {value}: a {joint.kind} joint takes "
+                f"{joint.nq} number(s), e.g. {example}"
+            )
         position[slices[name][0]] = value
     return RobotState(
         joint_position=position,

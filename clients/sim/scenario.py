@@ -10,15 +10,26 @@ dragged). Built-in scenarios (thesis ch. 7) live in
 
 from __future__ import annotations
 
+import difflib
 import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from clients.sim.backend import Push
+from clients.sim.errors import ScenarioError, ScenarioNotFound
+from clients.sim.model_file import resolve_model_path
 
-__all__ = ["SCENARIO_DIR", "ParamChange", "PushSpec", "Scenario", "load_scenario"]
+__all__ = [
+    "SCENARIO_DIR",
+    "ParamChange",
+    "PushSpec",
+    "Scenario",
+    "builtin_scenario_names",
+    "explain",
+    "load_scenario",
+]
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
 
@@ -120,14 +131,73 @@ class Scenario(BaseModel):
         return round(self.physics_rate_hz / self.control_rate_hz)
 
 
+def builtin_scenario_names() -> list[str]:
+    """Names of the built-in scenarios, sorted."""
+    return sorted(path.stem for path in SCENARIO_DIR.glob("*.toml"))
+
+
 def load_scenario(name_or_path: str | Path, **overrides: Any) -> Scenario:
-    """Load a scenario by built-in name or TOML path, with field overrides."""
+    """Load a scenario by built-in name or TOML path, with field overrides.
+
+    Raises:
+        ScenarioNotFound: No such built-in or file (the message lists the built-ins).
+        ScenarioError: The file is not TOML, has an unknown key (the message
+            suggests the closest known one), a value of the wrong type or
+            range, or names a model that does not exist.
+    """
     path = Path(name_or_path)
     if not path.suffix:
         path = SCENARIO_DIR / f"{name_or_path}.toml"
     if not path.is_file():
-        available = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
-        raise FileNotFoundError(f"no scenario {str(name_or_path)!r}; built in: {available}")
-    data = tomllib.loads(path.read_text())
+        raise ScenarioNotFound(
+            f"no scenario {str(name_or_path)!r}: no such file, and built in are "
+            f"{', '.join(builtin_scenario_names())}"
+        )
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"scenario {str(name_or_path)!r} is not valid TOML: {exc}") from exc
     data.update(overrides)
-    return Scenario.model_validate(data)
+    try:
+        scenario = Scenario.model_validate(data)
+    except ValidationError as exc:
+        raise ScenarioError(f"scenario {str(name_or_path)!r}: {explain(exc)}") from exc
+    try:
+        resolve_model_path(scenario.model)
+    except FileNotFoundError as exc:
+        raise ScenarioError(f"scenario {str(name_or_path)!r}: {exc}") from exc
+    return scenario
+
+
+_RECORDS: dict[str, type[BaseModel]] = {"pushes": PushSpec, "param_changes": ParamChange}
+"""List-valued keys of a scenario whose items are records with keys of their own."""
+
+
+def explain(error: ValidationError) -> str:
+    """A scenario's validation errors on one line, each with what to write instead.
+
+    An unknown key gets the closest known key ("did you mean"), a joint
+    position given as a number the shape it needs; the others pydantic's
+    message, the key path and the value given.
+    """
+    return "; ".join(_explain_one(details) for details in error.errors())
+
+
+def _explain_one(details: Any) -> str:
+    location = tuple(details["loc"])
+    where = ".".join(str(part) for part in location)
+    if details["type"] == "extra_forbidden":
+        record = _RECORDS.get(str(location[0]), Scenario) if len(location) > 1 else Scenario
+        known = list(record.model_fields)
+        close = difflib.get_close_matches(str(location[-1]), known, n=1)
+        hint = f"did you mean {close[0]!r}?" if close else f"known keys: {', '.join(known)}"
+        return f"unknown key {where!r}; {hint}"
+    if location[:1] == ("initial_joint_position",) and len(location) == 2:
+        return (
+            f"{where} = {details['input']!r}: give a list with one number per coordinate of "
+            "the joint, e.g. [0.3] for a hinge, [x, y, z, w] (a quaternion) for a ball joint"
+        )
+    if details["type"] == "missing":
+        return f"missing key {where!r}"
+    message = str(details["msg"]).removeprefix("Value error, ")
+    return f"{where}: {message} (got {details['input']!r})" if where else message

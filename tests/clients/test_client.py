@@ -231,7 +231,9 @@ def test_send_state_then_receive_command_matches_step(server):
 
     rng = np.random.default_rng(1)
     with ControllerClient(server.endpoint, timeout_s=10.0) as client:
-        welcome = client.connect("revolute_humanoid")
+        # `tracking` keeps no state between ticks (momentum's objectives do), so the same
+        # state sent twice must give the same command.
+        welcome = client.connect("revolute_humanoid", controller="tracking")
         state = random_state(welcome, rng)
         stepped = client.step(state)
         client.send_state(state)

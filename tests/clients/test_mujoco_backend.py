@@ -484,7 +484,8 @@ def test_a_dof_without_a_motor_is_refused(tmp_path):
         MujocoBackend(str(path))
 
 
-def test_divergence_raises_instead_of_teleporting():
+def test_divergence_raises_instead_of_teleporting(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # where MuJoCo would write MUJOCO_LOG.TXT
     model, _ = pinocchio_model("revolute_humanoid")
     backend = MujocoBackend("revolute_humanoid")
     state = neutral_state(model)
@@ -494,3 +495,4 @@ def test_divergence_raises_instead_of_teleporting():
         backend.step(np.zeros(model.nv - 6), [])
     with pytest.raises(ValueError, match="finite"):
         backend.step(np.full(model.nv - 6, np.nan), [])
+    assert list(tmp_path.iterdir()) == [], "MuJoCo's warning went to a log file in the cwd"

@@ -1,0 +1,129 @@
+"""A user's mistake through the real command line: one line on stderr, exit code 2, a hint.
+
+Each case runs ``python -m controller_server.cli`` (what the ``poise`` script
+runs) in a subprocess, in a temporary directory, bounded by a timeout.
+"""
+
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+TIMEOUT_S = 90  # the slowest case waits out the client's 10 s hello timeout
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def scenario(directory: Path, text: str) -> str:
+    path = directory / "mistake.toml"
+    path.write_text('name = "mistake"\nduration_s = 0.05\n' + text)
+    return str(path)
+
+
+def sim(directory: Path, *arguments: str) -> list[str]:
+    """``poise sim ARGUMENTS`` writing its report (if it got that far) into ``directory``."""
+    return ["sim", *arguments, "--output", str(directory / "out")]
+
+
+# (id, arguments given the temporary directory, text the one line must contain)
+MISTAKES = [
+    (
+        "nothing listening",
+        lambda d: sim(d, "stand", "--connect", f"tcp://127.0.0.1:{free_port()}"),
+        ["nothing answers at tcp://127.0.0.1:", "is `poise serve` running there?"],
+    ),
+    (
+        "endpoint without scheme",
+        lambda d: sim(d, "stand", "--connect", "localhost:5555"),
+        ["write tcp://localhost:5555"],
+    ),
+    (
+        "bind without scheme",
+        lambda d: ["serve", "--bind", "localhost:5555"],
+        ["--bind", "write tcp://localhost:5555"],
+    ),
+    (
+        "unknown scenario",
+        lambda d: sim(d, "no_such_scenario"),
+        ["no scenario 'no_such_scenario'", "push_sequence", "stand"],
+    ),
+    (
+        "typo in a scenario key",
+        lambda d: sim(d, scenario(d, "duraton_s = 1.0\n")),
+        ["unknown key 'duraton_s'; did you mean 'duration_s'?"],
+    ),
+    (
+        "missing model file",
+        lambda d: sim(d, scenario(d, f'model = "{d}/does_not_exist.xml"\n')),
+        ["model file", "does_not_exist.xml' does not exist"],
+    ),
+    (
+        "misspelled joint",
+        lambda d: sim(d, scenario(d, "[initial_joint_position]\nlft_knee = [0, 0, 0, 1]\n")),
+        ["no joint 'lft_knee'; did you mean 'left_knee'?", "right_ankle"],
+    ),
+    (
+        "joint value as a number",
+        lambda d: sim(d, scenario(d, "[initial_joint_position]\nleft_knee = 0.3\n")),
+        ["initial_joint_position.left_knee = 0.3: give a list", "[x, y, z, w]"],
+    ),
+    (
+        "joint value of the wrong length",
+        lambda d: sim(d, scenario(d, "[initial_joint_position]\nleft_knee = [0.3]\n")),
+        ["a ball joint takes 4 number(s)"],
+    ),
+]
+
+
+def run_poise(arguments: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "controller_server.cli", *arguments],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+        stdin=subprocess.DEVNULL,
+    )
+
+
+@pytest.mark.parametrize(
+    ("arguments", "hints"), [m[1:] for m in MISTAKES], ids=[m[0] for m in MISTAKES]
+)
+def test_a_mistake_is_one_line_and_exit_code_2(arguments, hints, tmp_path):
+    result = run_poise(arguments(tmp_path), tmp_path)
+    lines = result.stderr.splitlines()
+    assert "Traceback" not in result.stderr, result.stderr
+    assert len(lines) == 1, result.stderr
+    assert result.returncode == 2, result.stderr
+    for hint in hints:
+        assert hint in lines[0], lines[0]
+
+
+def test_port_already_in_use(tmp_path):
+    with socket.socket() as holder:
+        holder.bind(("127.0.0.1", 0))
+        holder.listen()
+        port = holder.getsockname()[1]
+        result = run_poise(
+            ["serve", "--workers", "1", "--bind", f"tcp://127.0.0.1:{port}"], tmp_path
+        )
+    assert "Traceback" not in result.stderr, result.stderr
+    assert result.stderr.splitlines() == [
+        f"poise serve: cannot bind 'tcp://127.0.0.1:{port}': Address already in use "
+        f"(addr='tcp://127.0.0.1:{port}'); another process (another `poise serve`?) listens "
+        "there: stop it, or bind another port (port * picks a free one)"
+    ]
+    assert result.returncode == 2
+
+
+def test_debug_shows_the_traceback(tmp_path):
+    result = run_poise(["--debug", "sim", "no_such_scenario"], tmp_path)
+    assert "Traceback" in result.stderr
+    assert "ScenarioNotFound: no scenario 'no_such_scenario'" in result.stderr
+    assert result.returncode == 1
