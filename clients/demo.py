@@ -28,6 +28,7 @@ def run_demo(
     controller: str = "momentum",
     curve: CurveKeys | None = None,
     record_dir: Path | None = None,
+    series: bool = False,
 ) -> int:
     """Run the push scenarios; exit code 0 if the robot stayed up in all of them, else 1."""
     if endpoint is None:
@@ -39,6 +40,7 @@ def run_demo(
         overrides={"backend": backend, "controller": controller},
         curve=curve,
         record_dir=record_dir,
+        series=series,
     )
     print(f"report: {output_dir / 'report.json'}; plots: {', '.join(r['plot'] for r in reports)}")
-    return 1 if any(r["fell"] for r in reports) else 0
+    return 1 if any(r["fell"] or not r["complete"] for r in reports) else 0

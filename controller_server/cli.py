@@ -48,9 +48,10 @@ def _as_usage_error(exc: Exception) -> UsageError | None:
         return exc
     from clients.client import ServerTimeout
     from clients.sim.errors import ScenarioError
+    from clients.sim.output import OutputBusy
     from protocol.endpoints import InvalidEndpoint
 
-    if isinstance(exc, ScenarioError | InvalidEndpoint | ServerTimeout):
+    if isinstance(exc, ScenarioError | InvalidEndpoint | ServerTimeout | OutputBusy):
         return UsageError(str(exc))
     return None
 
@@ -189,6 +190,7 @@ def _demo(args: argparse.Namespace) -> int:
         args.controller,
         curve=_curve_keys(args),
         record_dir=Path(args.record) if args.record else None,
+        series=args.series,
     )
 
 
@@ -289,8 +291,9 @@ def _sim(args: argparse.Namespace) -> int:
             overrides,
             curve=curve,
             record_dir=record_dir,
+            series=args.series,
         )
-        return 1 if any(report["fell"] for report in reports) else 0
+        return 1 if any(report["fell"] or not report["complete"] for report in reports) else 0
     push = PushSpec(
         body=args.push_body,
         force_in_world_N=(1.0, 0.0, 0.0),
@@ -376,11 +379,17 @@ def _add_client_key_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_record_option(parser: argparse.ArgumentParser) -> None:
+def _add_run_output_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--record",
         metavar="DIR",
         help="record each scenario's conversation with the server to DIR/<scenario>.mcap",
+    )
+    parser.add_argument(
+        "--series",
+        action="store_true",
+        help="also write each scenario's raw time series (states, commands, diagnostics) "
+        "to <output>/<scenario>.npz",
     )
 
 
@@ -607,7 +616,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="how long the swept push lasts (default: 0.1)",
     )
     _add_client_key_options(sim)
-    _add_record_option(sim)
+    _add_run_output_options(sim)
     sim.set_defaults(handler=_sim)
 
     demo = commands.add_parser(
@@ -643,7 +652,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="use a running server at ENDPOINT instead of starting one",
     )
     _add_client_key_options(demo)
-    _add_record_option(demo)
+    _add_run_output_options(demo)
     demo.set_defaults(handler=_demo)
 
     replay = commands.add_parser(
@@ -716,20 +725,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``poise`` console script.
 
     Sets single-threaded BLAS (unless the environment says otherwise) before
     anything imports numpy; turns a user's mistake into one line on stderr
-    and exit code 2 (``--debug``: the traceback).
+    and exit code 2 (``--debug``: the traceback). SIGTERM stops a command as
+    Ctrl-C does (``poise serve`` installs its own handlers): what ran is kept
+    (a partial report), exit code 130.
     """
     default_to_single_threaded_blas()
     args = build_parser().parse_args(argv)
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(name)s %(levelname)s %(message)s"
     )
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
         return int(args.handler(args))
+    except KeyboardInterrupt:
+        print(f"poise {args.command}: interrupted", file=sys.stderr)
+        return 130
     except Exception as exc:
         mistake = _as_usage_error(exc)
         if mistake is None or args.debug:

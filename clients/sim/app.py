@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import json
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -12,9 +11,11 @@ from clients.client import CurveKeys
 from clients.progress import ProgressBar
 from clients.server_process import ServerProcess
 from clients.sim.metrics import compute_metrics
+from clients.sim.output import OutputDirectory
 from clients.sim.plots import plot_run
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import PushSpec, Scenario, load_scenario
+from clients.sim.series import save_series
 
 __all__ = [
     "ABLATIONS",
@@ -65,20 +66,26 @@ def run_scenarios(
     progress: bool = True,
     curve: CurveKeys | None = None,
     record_dir: Path | None = None,
+    series: bool = False,
 ) -> list[dict[str, Any]]:
     """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table.
 
+    ``report.json`` is rewritten after every scenario, so a run killed half-way
+    leaves the report of what ran; a scenario stopped early (Ctrl-C, SIGTERM, a
+    server that stopped answering) is reported with ``complete: false`` and
+    why, then Ctrl-C or SIGTERM stops the run (``KeyboardInterrupt``).
+    With ``record_dir``, each scenario's conversation with the server is
+    recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it); with
+    ``series``, its raw time series go to ``<name>.npz`` (:mod:`clients.sim.series`).
+
     Raises:
         ScenarioError: A scenario cannot run (checked for all before the first runs).
-
-    With ``record_dir``, each scenario's conversation with the server is
-    recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it).
+        OutputBusy: Another run writes to ``output_dir``.
     """
     # Every scenario is checked before a server starts or a file is written.
     scenarios = [load_scenario(name, **(overrides or {})) for name in names]
-    output_dir.mkdir(parents=True, exist_ok=True)
-    reports = []
-    with server_endpoint(endpoint) as address:
+    reports: list[dict[str, Any]] = []
+    with OutputDirectory(output_dir) as output, server_endpoint(endpoint) as address:
         for scenario in scenarios:
             log_path = None
             if record_dir is not None:
@@ -89,11 +96,18 @@ def run_scenarios(
                     scenario, address, progress=bar, curve=curve, log_path=log_path
                 )
             metrics = compute_metrics(record)
-            plot_path = output_dir / f"{scenario.name}.png"
-            plot_run(record, plot_path)
-            metrics["plot"] = str(plot_path)
+            if record.commands:
+                metrics["plot"] = str(output_dir / f"{scenario.name}.png")
+                plot_run(record, Path(metrics["plot"]))
+                if series:
+                    metrics["series"] = str(
+                        save_series(record, output_dir / f"{scenario.name}.npz")
+                    )
             reports.append(metrics)
-    (output_dir / "report.json").write_text(json.dumps(reports, indent=2))
+            output.write_report(reports)
+            if record.stopped == "interrupted":
+                _print_table(reports)
+                raise KeyboardInterrupt
     _print_table(reports)
     return reports
 
@@ -104,7 +118,15 @@ def _print_table(reports: list[dict[str, Any]]) -> None:
         f"{'slip mm':>9}{'RTF':>7}"
     )
     for r in reports:
-        result = f"fell {r['fall_time_s']:.2f} s" if r["fell"] else "stayed up"
+        if r["fell"]:
+            result = f"fell {r['fall_time_s']:.2f} s"
+        elif not r["complete"]:
+            result = f"stopped {r['simulated_s']:.2f} s"
+        else:
+            result = "stayed up"
+        if "com_excursion_m" not in r:  # stopped before its first tick
+            print(f"{r['scenario']:<24}{r['backend']:<10}{result:<16}")
+            continue
         print(
             f"{r['scenario']:<24}{r['backend']:<10}{result:<16}{r['com_excursion_m']:>10.3f}"
             f"{r['cop_strictly_inside_fraction']:>8.0%}{r['foot_slip_m'] * 1e3:>9.1f}"

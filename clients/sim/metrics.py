@@ -99,7 +99,23 @@ def _foot_slip_and_rotation(record: RunRecord) -> tuple[float, float]:
 
 
 def compute_metrics(record: RunRecord) -> dict[str, Any]:
-    """The run's report: fall, CM excursion, tracking RMS, COP margin, foot slip, torques, speed."""
+    """The run's report: fall, CM excursion, tracking RMS, COP margin, foot slip, torques, speed.
+
+    A run stopped before its first tick reports only what it is and why it stopped.
+    """
+    outcome = {
+        "scenario": record.scenario.name,
+        "backend": record.scenario.backend,
+        "controller": record.scenario.controller,
+        "fell": record.fell,
+        "fall_time_s": record.fall_time_s,
+        "fall_reason": record.fall_reason,
+        "complete": not record.stopped,
+        "stopped": record.stopped,
+        "simulated_s": record.simulated_s,
+    }
+    if not record.commands:
+        return outcome
     diagnostics = record.diagnostics()
     flags_of_diagnosed = [record.contact_flags[tick] for tick in record.diagnosed_ticks()]
     com = np.array([d.position_com_in_world for d in diagnostics])
@@ -113,13 +129,7 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
     errors = _joint_errors_rad(record)
     slip_m, rotation_rad = _foot_slip_and_rotation(record)
     return {
-        "scenario": record.scenario.name,
-        "backend": record.scenario.backend,
-        "controller": record.scenario.controller,
-        "fell": record.fell,
-        "fall_time_s": record.fall_time_s,
-        "fall_reason": record.fall_reason,
-        "simulated_s": record.simulated_s,
+        **outcome,
         "com_excursion_m": float(np.max(np.linalg.norm(com[:, :2] - com[0, :2], axis=1))),
         "tracking_rms_rad": {
             group: float(np.sqrt(np.mean(values**2))) for group, values in sorted(errors.items())

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from clients.client import ControllerClient, CurveKeys, ServerError
+from clients.client import ControllerClient, CurveKeys, ServerError, ServerTimeout
 from clients.layout import joint_slices, neutral_joint_position
 from clients.sim.backend import PhysicsBackend, Push
 from clients.sim.errors import ScenarioError
@@ -115,6 +115,8 @@ class RunRecord:
     fell: bool = False
     fall_time_s: float | None = None
     fall_reason: str = ""
+    stopped: str = ""
+    """Why the run ended before ``duration_s`` without a fall ("": it did not)."""
     wall_time_s: float = 0.0
 
     def diagnostics(self) -> list[Diagnostics]:
@@ -228,52 +230,61 @@ def run_scenario(
         )
         state = backend.state()
         start = time.perf_counter()
-        for tick in range(ticks):
-            while changes and changes[0].time_s <= backend.time_s + 1e-9:
-                client.set_params(changes.pop(0).params)
-            touching = backend.contact_flags()
-            # The wrenches cost MuJoCo a contact-force call per contact: read them only
-            # when they are sent or decide whether a touching foot becomes a support.
-            wrenches = None
-            if measured or any(t and not f for t, f in zip(touching, flags, strict=True)):
-                wrenches = backend.contact_wrenches_in_world()
-            normal_force_N = np.zeros(len(touching)) if wrenches is None else wrenches[:, 2]
-            flags = support_flags(
-                flags, touching, normal_force_N, scenario.support_force_threshold_N
-            )
-            wrenches = wrenches if measured else None
-            sent, sent_time_s = state, backend.time_s
-            if held_command is not None and model is not None:
-                # This tick's command acts from the next tick on: send the state it will
-                # meet there, predicted with the accelerations of the command acting now.
-                period_s = 1.0 / scenario.control_rate_hz
-                sent = state.predicted(period_s, model, held_command)
-                sent_time_s += period_s
-            try:
-                client.send_state(sent.to_message(sent_time_s, flags, wrenches))
-                if held_command is None or not scenario.command_delay_ticks:
-                    command = client.receive_command()
-                    non_foot_contact = _step_physics(backend, command.joint_torque, pushes, steps)
-                else:  # the physics runs while the server computes this state's command
-                    non_foot_contact = _step_physics(
-                        backend, held_command.joint_torque, pushes, steps
-                    )
-                    command = client.receive_command()
-                held_command = command
-            except ServerError as exc:  # no command for this state: the run ends here
-                record.fell, record.fall_time_s = True, backend.time_s
-                record.fall_reason = f"controller error {exc.code.name}: {exc.detail}"
-                break
-            record.time_s.append(tick / scenario.control_rate_hz)
-            record.states.append(state)
-            record.commands.append(command)
-            record.contact_flags.append(flags)
-            state = backend.state()  # after the step: checked now, sent next tick
-            reason = _fall_reason(state, standing_height_m, non_foot_contact)
-            if reason:
-                record.fell, record.fall_time_s, record.fall_reason = True, backend.time_s, reason
-                break
-            if progress is not None and tick % 50 == 0:
-                progress(tick / ticks)
+        try:
+            for tick in range(ticks):
+                while changes and changes[0].time_s <= backend.time_s + 1e-9:
+                    client.set_params(changes.pop(0).params)
+                touching = backend.contact_flags()
+                # The wrenches cost MuJoCo a contact-force call per contact: read them only
+                # when they are sent or decide whether a touching foot becomes a support.
+                wrenches = None
+                if measured or any(t and not f for t, f in zip(touching, flags, strict=True)):
+                    wrenches = backend.contact_wrenches_in_world()
+                normal_force_N = np.zeros(len(touching)) if wrenches is None else wrenches[:, 2]
+                flags = support_flags(
+                    flags, touching, normal_force_N, scenario.support_force_threshold_N
+                )
+                wrenches = wrenches if measured else None
+                sent, sent_time_s = state, backend.time_s
+                if held_command is not None and model is not None:
+                    # This tick's command acts from the next tick on: send the state it will
+                    # meet there, predicted with the accelerations of the command acting now.
+                    period_s = 1.0 / scenario.control_rate_hz
+                    sent = state.predicted(period_s, model, held_command)
+                    sent_time_s += period_s
+                try:
+                    client.send_state(sent.to_message(sent_time_s, flags, wrenches))
+                    if held_command is None or not scenario.command_delay_ticks:
+                        command = client.receive_command()
+                        non_foot_contact = _step_physics(
+                            backend, command.joint_torque, pushes, steps
+                        )
+                    else:  # the physics runs while the server computes this state's command
+                        non_foot_contact = _step_physics(
+                            backend, held_command.joint_torque, pushes, steps
+                        )
+                        command = client.receive_command()
+                    held_command = command
+                except ServerError as exc:  # no command for this state: the run ends here
+                    record.fell, record.fall_time_s = True, backend.time_s
+                    record.fall_reason = f"controller error {exc.code.name}: {exc.detail}"
+                    break
+                except ServerTimeout as exc:  # the server is gone: keep what ran
+                    record.stopped = str(exc)
+                    break
+                record.time_s.append(tick / scenario.control_rate_hz)
+                record.states.append(state)
+                record.commands.append(command)
+                record.contact_flags.append(flags)
+                state = backend.state()  # after the step: checked now, sent next tick
+                reason = _fall_reason(state, standing_height_m, non_foot_contact)
+                if reason:
+                    record.fell, record.fall_time_s = True, backend.time_s
+                    record.fall_reason = reason
+                    break
+                if progress is not None and tick % 50 == 0:
+                    progress(tick / ticks)
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM: keep what ran; the caller stops
+            record.stopped = "interrupted"
         record.wall_time_s = time.perf_counter() - start
     return record
