@@ -69,6 +69,18 @@ MISTAKES = [
         ["no joint 'lft_knee'; did you mean 'left_knee'?", "right_ankle"],
     ),
     (
+        "misspelled push body",
+        lambda d: sim(
+            d,
+            scenario(
+                d,
+                "[[pushes]]\nbody = 'chst'\nforce_in_world_N = [10.0, 0.0, 0.0]\n"
+                "start_s = 0.1\nduration_s = 0.1\n",
+            ),
+        ),
+        ["pushes[0].body", "no body 'chst'; did you mean 'chest'?", "right_foot"],
+    ),
+    (
         "joint value as a number",
         lambda d: sim(d, scenario(d, "[initial_joint_position]\nleft_knee = 0.3\n")),
         ["initial_joint_position.left_knee = 0.3: give a list", "[x, y, z, w]"],

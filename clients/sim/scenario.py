@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from clients.sim.backend import Push
 from clients.sim.errors import ScenarioError, ScenarioNotFound
-from clients.sim.model_file import resolve_model_path
+from clients.sim.model_file import body_names, resolve_model_path
 
 __all__ = [
     "SCENARIO_DIR",
@@ -163,10 +163,23 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> Scenario:
     except ValidationError as exc:
         raise ScenarioError(f"scenario {str(name_or_path)!r}: {explain(exc)}") from exc
     try:
-        resolve_model_path(scenario.model)
+        model_path = resolve_model_path(scenario.model)
     except FileNotFoundError as exc:
         raise ScenarioError(f"scenario {str(name_or_path)!r}: {exc}") from exc
+    _check_push_bodies(str(name_or_path), scenario, body_names(model_path))
     return scenario
+
+
+def _check_push_bodies(name: str, scenario: Scenario, bodies: list[str]) -> None:
+    """Refuse a push on a body the model lacks now, not when the push starts."""
+    for index, push in enumerate(scenario.pushes):
+        if bodies and push.body not in bodies:
+            close = difflib.get_close_matches(push.body, bodies, n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise ScenarioError(
+                f"scenario {name!r}: pushes[{index}].body: {scenario.model} has no body "
+                f"{push.body!r}; {hint}bodies: {', '.join(bodies)}"
+            )
 
 
 _RECORDS: dict[str, type[BaseModel]] = {"pushes": PushSpec, "param_changes": ParamChange}
