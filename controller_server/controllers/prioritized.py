@@ -29,7 +29,12 @@ Priorities and weights (eq. 37) of every objective, and its gains and
 references, change at run time through ``set_params``. Inequalities
 ``D x + f ≥ 0``: ``λ ≥ 0`` (eq. 25), non-penetration ``Vᵀ(J_c q̈ + J̇_c q̇) ≥ 0``
 (eq. 26, flat static ground so ``V̇ = 0``), torque limits, and joints at a
-limit may not accelerate further out (eq. 27, see :func:`_joint_limit_rows`).
+limit may not accelerate further out (eq. 27, see
+:func:`~controller_server.controllers.prioritized_layout.joint_limit_rows`).
+
+Every objective on ``q̈`` is a feature of :mod:`controller_server.features`,
+shared with the weighted controller; the layout
+(:mod:`controller_server.controllers.prioritized_layout`) writes it over ``x``.
 
 Setpoint gains follow eq. 4: ``k_v = 2 ζ √k_p`` with damping ratio ``ζ = 1``
 by default (de Lasa's ``k_v = 2 √k_p``).
@@ -38,7 +43,7 @@ by default (de Lasa's ``k_v = 2 √k_p``).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
@@ -47,7 +52,6 @@ import pinocchio as pin
 from controller_server.balance_points import (
     ground_reference_points,
     shrink_polygon,
-    support_polygon,
 )
 from controller_server.constraints import compute_support_equalities
 from controller_server.controllers.base import (
@@ -60,11 +64,20 @@ from controller_server.controllers.base import (
     check_finite_dynamics,
     normalized_configuration_part,
 )
+from controller_server.controllers.prioritized_layout import (
+    NUM_ROOT_DOFS,
+    PrioritizedLayout,
+    friction_cone_basis,
+    joint_limit_rows,
+)
 from controller_server.dynamics import DynamicsTerms, compute_dynamics_terms
 from controller_server.features import (
     Objective,
     admissible_linear_momentum_rate,
-    compute_tracking_objective,
+    compute_angular_momentum_objective,
+    compute_ground_contact_objective,
+    compute_linear_momentum_objective,
+    compute_posture_objectives,
 )
 from controller_server.features.setpoint import (
     critical_damping,
@@ -77,7 +90,7 @@ from controller_server.solvers.prioritized import PrioritizedSolution, solve_pri
 
 __all__ = ["OBJECTIVES", "PrioritizedController", "friction_cone_basis"]
 
-NUM_ROOT_DOFS = 6
+VERTICAL = slice(2, 3)
 TARGET_HANDOVER_S = 0.05
 """The target objective hands over to the setpoint this long before T: re-planned every tick,
 eq. 7 amplifies what is left of a velocity error as T → 0."""
@@ -111,18 +124,6 @@ With these defaults ``pose`` uses every joint's freedom at level 2, so the
 level-3 objectives (``com_height``, ``torque``) have none left and do
 nothing: rank them at 2 (or ``pose`` at 3) to use them.
 """
-
-
-def friction_cone_basis(friction_coefficient: float) -> np.ndarray:
-    """``V``: ``(3, 4)`` unit edges of the friction pyramid on a ground of normal +z (eq. 23).
-
-    The edges ``(±μ', ±μ', 1)`` with ``μ' = μ/√2`` span the pyramid inscribed
-    in Coulomb's cone, the same pyramid the weighted controller's inverse
-    dynamics uses, so ``f = V λ`` with ``λ ≥ 0`` is always transmissible.
-    """
-    mu = friction_coefficient / math.sqrt(2.0)
-    edges = np.array([[mu, mu, 1.0], [mu, -mu, 1.0], [-mu, mu, 1.0], [-mu, -mu, 1.0]]).T
-    return edges / np.linalg.norm(edges, axis=0)
 
 
 def _priority_spec(name: str) -> ParamSpec:
@@ -300,7 +301,7 @@ class PrioritizedController(Controller):
         terms = compute_dynamics_terms(robot, self._data, control_input.q, control_input.v)
         check_finite_dynamics(terms)
         flags = self.supports(control_input)
-        layout = _Layout(
+        layout = PrioritizedLayout(
             robot,
             terms,
             [allowed > 0.5 for allowed in p["support_mask"]],
@@ -346,41 +347,37 @@ class PrioritizedController(Controller):
         return self._output(terms, layout, flags, objectives, desired_rates, solution)
 
     def _objectives(
-        self, control_input: ControlInput, terms: DynamicsTerms, layout: _Layout
+        self, control_input: ControlInput, terms: DynamicsTerms, layout: PrioritizedLayout
     ) -> tuple[dict[str, Objective], dict[str, np.ndarray]]:
-        """The objectives by name, and the desired momentum rates (for the diagnostics)."""
+        """The objectives by name, and the desired momentum rates (for the diagnostics).
+
+        Every objective on ``q̈`` comes from the feature library
+        (:mod:`controller_server.features`), written over ``x`` by the layout.
+        """
         p, model = self._params, self.robot.model
         q, v = control_input.q, control_input.v
         momentum, mass = terms.momentum, terms.total_mass
         ratio = p["damping_ratio"]
-        objectives = {
-            "dynamics": Objective(
-                "dynamics",
-                np.hstack([layout.S_T, -terms.mass_matrix, layout.contact_force_map]),
-                terms.bias_forces,
-                np.ones(model.nv),
-            )
-        }
+        on_acceleration: list[Objective] = []
         # Contact (Table 1, priority 1): each sole point toward its ground projection.
         if layout.point_jacobian.shape[0]:
-            positions = layout.point_positions
-            velocities = (layout.point_jacobian @ v).reshape(-1, 3)
-            targets = positions.copy()
-            targets[:, 2] = p["ground_height"]
             stiffness = p["contact_stiffness"]
-            desired = setpoint_acceleration(
-                targets, positions, velocities, stiffness, critical_damping(stiffness, ratio)
-            ).reshape(-1)
-            objectives["contact"] = layout.over_acceleration(
-                "contact",
-                layout.point_jacobian,
-                desired - layout.point_drift,
-                p["weight_contact"],
+            on_acceleration.append(
+                compute_ground_contact_objective(
+                    layout.point_jacobian,
+                    layout.point_drift,
+                    layout.point_positions,
+                    v,
+                    p["ground_height"],
+                    stiffness,
+                    critical_damping(stiffness, ratio),
+                    p["weight_contact"],
+                )
             )
         # CM over the support centroid and at its height (Table 1, priority 2).
         com = terms.position_com_in_world
         com_velocity = momentum.linear_momentum / mass
-        desired_com_acceleration = np.full(3, np.nan)
+        desired_linear_rate = np.full(3, np.nan)
         if layout.support_positions.shape[0]:
             reference_xy = layout.support_positions[:, :2].mean(axis=0) + p["com_offset_xy"]
             stiffness = p["com_stiffness"]
@@ -395,87 +392,62 @@ class PrioritizedController(Controller):
             # needs stays `cop_margin` inside the feet (as the weighted controller's L̇_des).
             # Otherwise `com` takes all of the COP's authority and the angular momentum
             # objective below it has none left (a 220 N head push then fells the robot).
-            gravity = float(np.linalg.norm(model.gravity.linear))
-            admissible = admissible_linear_momentum_rate(
+            desired_linear_rate = admissible_linear_momentum_rate(
                 mass * np.array([*desired_xy, 0.0]),
                 mass,
                 com,
                 shrink_polygon(layout.support_polygon, p["cop_margin"]),
                 p["ground_height"],
-                gravity,
+                float(np.linalg.norm(model.gravity.linear)),
                 friction_coefficient=layout.smallest_friction_coefficient,
             )
-            desired_xy = admissible[:2] / mass
-            objectives["com"] = layout.over_acceleration(
-                "com",
-                momentum.R[:2] / mass,
-                desired_xy - momentum.r_bias[:2] / mass,
-                p["weight_com"],
+            desired_linear_rate[2] = mass * self._height_acceleration(
+                control_input.time_s, com, com_velocity
             )
-            desired_z = self._height_acceleration(control_input.time_s, com, com_velocity)
-            desired_com_acceleration = np.array([*desired_xy, desired_z])
-            objectives["com_height"] = layout.over_acceleration(
-                "com_height",
-                momentum.R[2:] / mass,
-                np.array([desired_z - momentum.r_bias[2] / mass]),
-                p["weight_com_height"],
-            )
-        # Angular momentum (eq. 8–9), rest pose and minimum torque (priority 3).
-        desired_rate = p["angular_momentum_stiffness"] * (
+            on_acceleration += [
+                compute_linear_momentum_objective(
+                    momentum, mass, desired_linear_rate, p["weight_com"], name="com"
+                ),
+                compute_linear_momentum_objective(
+                    momentum,
+                    mass,
+                    desired_linear_rate,
+                    p["weight_com_height"],
+                    axes=VERTICAL,
+                    name="com_height",
+                ),
+            ]
+        # Angular momentum (eq. 8–9), rest pose and trunk (priority 2).
+        desired_angular_rate = p["angular_momentum_stiffness"] * (
             p["reference_angular_momentum"] - momentum.angular_momentum
         )
-        objectives["angular_momentum"] = layout.over_acceleration(
-            "angular_momentum",
-            momentum.S / mass,  # per kg, as the CM rows (m/s²): weights in one level compare
-            (desired_rate - momentum.s_bias) / mass,
-            p["weight_angular_momentum"],
+        on_acceleration.append(
+            compute_angular_momentum_objective(
+                momentum, mass, p["weight_angular_momentum"], desired_rate=desired_angular_rate
+            )
         )
-        q_rest = pin.neutral(model)
-        q_rest[:3] = q[:3]
-        q_rest[3:7] = p["reference_trunk_orientation_xyzw"]
-        q_rest[7:] = p["reference_joint_position"]
-        # One PD on the configuration error (eq. 4): the root orientation rows are `trunk`, the
-        # joint rows the rest pose `pose` (§4), each with its own gains.
-        stiffness = np.concatenate(
-            [
-                np.zeros(3),
-                np.full(3, p["trunk_stiffness"]),
-                np.full(model.nv - 6, p["pose_stiffness"]),
-            ]
+        trunk, pose = compute_posture_objectives(
+            model,
+            q,
+            v,
+            p["reference_trunk_orientation_xyzw"],
+            p["reference_joint_position"],
+            p["trunk_stiffness"],
+            p["pose_stiffness"],
+            ratio,
+            p["weight_trunk"],
+            p["weight_pose"],
         )
-        zero = np.zeros(model.nv)
-        servo = compute_tracking_objective(
-            model, q, v, q_rest, zero, zero, stiffness, critical_damping(stiffness, ratio), zero
-        )
-        objectives["pose"] = layout.over_acceleration(
-            "pose", servo.A[6:], servo.b[6:], p["weight_pose"]
-        )
-        objectives["trunk"] = layout.over_acceleration(
-            "trunk", servo.A[3:6], servo.b[3:6], p["weight_trunk"]
-        )
-        # Lowest level: the contact forces the levels above leave free (internal forces
-        # between the feet) are the smallest, as in the weighted controller's distribution.
-        objectives["forces"] = Objective(
-            "forces",
-            layout.force_selection,
-            np.zeros(layout.nl),
-            np.ones(layout.nl),
-        )
-        selection = np.asarray(p["torque_selection"])
-        objectives["torque"] = Objective(
-            "torque",
-            np.hstack(
-                [
-                    np.diag(np.sqrt(selection)),
-                    np.zeros((selection.size, layout.size - selection.size)),
-                ]
-            ),
-            np.zeros(selection.size),
-            np.full(selection.size, p["weight_torque"]) * (selection > 0),
-        )
+        on_acceleration += [pose, trunk]
+        objectives = {
+            "dynamics": layout.equations_of_motion(terms),
+            **{o.name: layout.over_acceleration(o) for o in on_acceleration},
+            "forces": layout.least_forces(),
+            "torque": layout.least_torque(np.asarray(p["torque_selection"]), p["weight_torque"]),
+        }
         desired_rates = {
-            "linear_momentum_rate": mass * desired_com_acceleration,
-            "angular_momentum_rate": desired_rate,
+            "linear_momentum_rate": desired_linear_rate,
+            "angular_momentum_rate": desired_angular_rate,
         }
         return objectives, desired_rates
 
@@ -505,7 +477,7 @@ class PrioritizedController(Controller):
         )
 
     def _inequalities(
-        self, control_input: ControlInput, terms: DynamicsTerms, layout: _Layout
+        self, control_input: ControlInput, terms: DynamicsTerms, layout: PrioritizedLayout
     ) -> tuple[np.ndarray, np.ndarray]:
         """Rows of ``D x + f ≥ 0``: λ ≥ 0, non-penetration, torque and joint limits."""
         n, nu, nl = layout.size, layout.nu, layout.nl
@@ -528,7 +500,7 @@ class PrioritizedController(Controller):
             rows = np.zeros((bounded.size, n))
             rows[np.arange(bounded.size), bounded] = 1.0
             blocks += [(-rows, limit[bounded]), (rows, limit[bounded])]
-        rows, offsets = _joint_limit_rows(self.robot, control_input.q, n, nu)
+        rows, offsets = joint_limit_rows(self.robot, control_input.q, n, nu)
         if len(offsets):
             blocks.append((rows, offsets))
         if not blocks:
@@ -538,7 +510,7 @@ class PrioritizedController(Controller):
     def _output(
         self,
         terms: DynamicsTerms,
-        layout: _Layout,
+        layout: PrioritizedLayout,
         flags: tuple[bool, ...],
         objectives: dict[str, Objective],
         desired_rates: dict[str, np.ndarray],
@@ -619,96 +591,6 @@ class PrioritizedController(Controller):
         )
 
 
-class _Layout:
-    """Where ``τ``, ``q̈`` and ``λ`` sit in ``x`` this tick, and the contact maps.
-
-    Three sets of sole points:
-
-    * *planted*: every point of every contact the ``support_mask`` allows,
-      servoed to the ground by ``contact`` (Table 1: "keep feet planted"), so a
-      foot a push has lifted is brought back down;
-    * *supporting*: the points of the contacts the client reports as supports,
-      whose centroid and hull are the base of support of ``com``;
-    * *loaded*: planted points within ``contact_distance`` of the ground, the
-      only ones carrying a force (a ``λ`` block) and a non-penetration row, as
-      de Lasa §4 enforces contact "for all contact points close to the
-      ground". A lifted heel is pulled down, not held by a force it cannot
-      have; a foot set back down carries weight at once, whatever the
-      client's flags (a client that flags only loaded feet would otherwise
-      never see it loaded).
-    """
-
-    def __init__(
-        self,
-        robot: RobotModel,
-        terms: DynamicsTerms,
-        planted: Sequence[bool],
-        supports: Sequence[bool],
-        friction_coefficients: np.ndarray,
-        ground_height: float,
-        contact_distance: float,
-    ):
-        nv = robot.model.nv
-        self.nv, self.nu = nv, nv - NUM_ROOT_DOFS
-        owner = np.repeat(
-            np.arange(len(robot.contacts)), [len(c.points_in_frame) for c in robot.contacts]
-        )
-        positions = np.vstack(terms.position_points_in_world)
-        jacobian = np.vstack(terms.point_jacobians)
-        drift = np.concatenate(terms.point_drifts)
-        mus = np.asarray(friction_coefficients, dtype=float)[owner]
-
-        def rows(points: np.ndarray) -> np.ndarray:
-            return (3 * points[:, None] + np.arange(3)).reshape(-1)
-
-        planted_points = np.flatnonzero(np.asarray(planted)[owner])
-        #: Planted points: ``(3s, nv)`` Jacobian, ``(3s,)`` drift, ``(s, 3)`` positions.
-        self.point_jacobian = jacobian[rows(planted_points)]
-        self.point_drift = drift[rows(planted_points)]
-        self.point_positions = positions[planted_points]
-        supporting = np.flatnonzero(np.asarray(supports)[owner])
-        #: Supporting points' positions ``(k, 3)``: the base of support.
-        self.support_positions = positions[supporting]
-        #: Their convex hull, counter-clockwise x–y vertices.
-        self.support_polygon = support_polygon(self.support_positions)
-        self.smallest_friction_coefficient = float(mus[supporting].min(initial=math.inf))
-        near = positions[planted_points, 2] <= ground_height + contact_distance
-        loaded = planted_points[near]
-        #: Indices (over all the robot's contact points) of the points carrying force.
-        self.force_point_indices = loaded
-        force_jacobian = jacobian[rows(loaded)]
-        self.nl = 4 * loaded.size
-        #: ``(3p, 4p)`` block-diagonal V: point forces from λ (eq. 23).
-        self.cone = np.zeros((3 * loaded.size, self.nl))
-        for i, point in enumerate(loaded):
-            self.cone[3 * i : 3 * i + 3, 4 * i : 4 * i + 4] = friction_cone_basis(mus[point])
-        #: ``(4p, nv)`` and ``(4p,)``: ``Vᵀ J_c`` and ``Vᵀ J̇_c q̇`` of eq. 26.
-        self.cone_jacobian = self.cone.T @ force_jacobian
-        self.cone_drift = self.cone.T @ drift[rows(loaded)]
-        #: ``(nv, nλ)``: J_cᵀ V, generalized force of λ (eq. 24).
-        self.contact_force_map = force_jacobian.T @ self.cone
-        #: ``(nv, nu)``: Sᵀ, actuated torques into generalized forces.
-        self.S_T = np.vstack([np.zeros((NUM_ROOT_DOFS, self.nu)), np.eye(self.nu)])
-        self.size = self.nu + nv + self.nl
-        #: ``(nλ, size)``: the rows picking λ out of x.
-        self.force_selection = np.hstack([np.zeros((self.nl, self.nu + nv)), np.eye(self.nl)])
-
-    def over_acceleration(
-        self,
-        name: str,
-        A: np.ndarray,
-        b: np.ndarray,
-        weight: float,
-        row_weights: np.ndarray | None = None,
-    ) -> Objective:
-        """An objective on ``q̈`` written over ``x = [τ, q̈, λ]``."""
-        rows = A.shape[0]
-        full = np.zeros((rows, self.size))
-        full[:, self.nu : self.nu + self.nv] = A
-        weights = np.full(rows, weight) if row_weights is None else weight * row_weights
-        return Objective(name, full, b, weights)
-
-
 def _normalized(level: list[Objective]) -> list[Objective]:
     """The level scaled to unit Frobenius norm ``‖W^½ A‖_F = 1`` (same minimizers).
 
@@ -721,32 +603,3 @@ def _normalized(level: list[Objective]) -> list[Objective]:
     if not scale > 0.0:
         return level
     return [Objective(o.name, o.A, o.b, o.weight / scale**2) for o in level]
-
-
-def _joint_limit_rows(
-    robot: RobotModel, q: np.ndarray, size: int, nu: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """``±q̈_i ≥ 0`` for 1-DoF joints at or past a limit (de Lasa eq. 27).
-
-    The paper adds a limit "contact" force ``λ_lim`` per such joint; our
-    simulators model no joint stop that would supply it, so only its
-    non-penetration half is kept: a joint at its lower limit may not
-    accelerate further down, at its upper limit not further up. Ball joints
-    have no scalar range and are left to the rest pose.
-    """
-    model = robot.model
-    rows, offsets = [], []
-    for joint in model.joints[2:]:
-        if joint.nq != 1:
-            continue
-        value = q[joint.idx_q]
-        lower, upper = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
-        sign = 1.0 if value <= lower else -1.0 if value >= upper else 0.0
-        if sign:
-            row = np.zeros(size)
-            row[nu + joint.idx_v] = sign
-            rows.append(row)
-            offsets.append(0.0)
-    if not rows:
-        return np.zeros((0, size)), np.zeros(0)
-    return np.array(rows), np.array(offsets)

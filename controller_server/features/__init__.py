@@ -4,6 +4,7 @@ from controller_server.features.angular_momentum import (
     angular_momentum_weight,
     compute_angular_momentum_objective,
 )
+from controller_server.features.contact_points import compute_ground_contact_objective
 from controller_server.features.joint_limits import (
     BallJointLimit,
     RevoluteJointLimit,
@@ -19,6 +20,7 @@ from controller_server.features.linear_momentum import (
 from controller_server.features.motion_clip import ClipSample, MotionClip, load_motion_clip
 from controller_server.features.objective import Objective
 from controller_server.features.point_acceleration import PointTarget, compute_point_objective
+from controller_server.features.posture import compute_posture_objectives
 from controller_server.features.tracking import compute_tracking_objective
 
 __all__ = [
@@ -31,8 +33,10 @@ __all__ = [
     "admissible_linear_momentum_rate",
     "angular_momentum_weight",
     "compute_angular_momentum_objective",
+    "compute_ground_contact_objective",
     "compute_linear_momentum_objective",
     "compute_point_objective",
+    "compute_posture_objectives",
     "compute_tracking_objective",
     "default_joint_limits",
     "desired_linear_momentum_rate",

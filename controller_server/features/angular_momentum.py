@@ -42,10 +42,20 @@ def angular_momentum_weight(
 
 
 def compute_angular_momentum_objective(
-    momentum: MomentumRates, total_mass: float, weight: float, damping: float = 0.0
+    momentum: MomentumRates,
+    total_mass: float,
+    weight: float,
+    damping: float = 0.0,
+    desired_rate: np.ndarray | None = None,
 ) -> Objective:
-    """Rows ``S / m_T`` toward ``Ḣ_des = −k_H H`` (eq. 5.16; ``k_H = 0``: eq. 5.15), weight β_ba."""
-    desired_rate = -damping * momentum.angular_momentum
+    """Rows ``S / m_T`` toward ``Ḣ_des``, weight β_ba (eq. 5.16).
+
+    ``Ḣ_des = −k_H H`` (``k_H = 0``: eq. 5.15) unless ``desired_rate`` is
+    given (de Lasa's ``L̇_d = k_p (L_r − L)``, eq. 8–9). Divided by ``m_T``,
+    as the CM rows, so weights of the two compare.
+    """
+    if desired_rate is None:
+        desired_rate = -damping * momentum.angular_momentum
     return Objective(
         "angular_momentum",
         momentum.S / total_mass,

@@ -101,12 +101,22 @@ def admissible_linear_momentum_rate(
 
 
 def compute_linear_momentum_objective(
-    momentum: MomentumRates, total_mass: float, desired_rate: np.ndarray, weight: float
+    momentum: MomentumRates,
+    total_mass: float,
+    desired_rate: np.ndarray,
+    weight: float,
+    axes: slice = HORIZONTAL,
+    name: str = "linear_momentum",
 ) -> Objective:
-    """Rows ``R_xy / m_T`` and ``(L̇_des − r_bias)_xy / m_T`` with weight β_bl (eq. 5.10)."""
+    """Rows ``R / m_T`` and ``(L̇_des − r_bias) / m_T`` on ``axes`` with weight β_bl (eq. 5.10).
+
+    Divided by ``m_T`` the rows are CM accelerations (m/s²): on x and y this is
+    the weighted controller's C_bl and the prioritized controller's ``com``
+    (de Lasa's E_com∥); on z (``axes=slice(2, 3)``) its ``com_height`` (E_com⊥).
+    """
     return Objective(
-        "linear_momentum",
-        momentum.R[HORIZONTAL] / total_mass,
-        (desired_rate - momentum.r_bias)[HORIZONTAL] / total_mass,
-        np.full(2, weight),
+        name,
+        momentum.R[axes] / total_mass,
+        (desired_rate - momentum.r_bias)[axes] / total_mass,
+        np.full(len(range(3)[axes]), weight),
     )

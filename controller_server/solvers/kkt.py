@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller_server.constraints import Equality
-from controller_server.features import Objective
+from controller_server.features.objective import Objective
 from controller_server.solvers.damped import damped_cholesky, damped_solve_psd
 
 __all__ = ["KKTSolution", "WeightedProblem", "build_weighted_problem", "solve_weighted_kkt"]

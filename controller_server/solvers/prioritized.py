@@ -121,7 +121,7 @@ try:
 except ImportError:  # optional backend: qpsolvers then reports it as not installed
     proxqp = None
 
-from controller_server.features import Objective
+from controller_server.features.objective import Objective
 from controller_server.solvers.damped import damping_for_gain_bound
 
 __all__ = [
