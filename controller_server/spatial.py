@@ -4,23 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["cross", "skew", "stacked_skew", "wrench_map"]
-
-
-def skew(u: np.ndarray) -> np.ndarray:
-    """Cross-product matrix ``[u]×`` (Macchietto 2008, eq. A.4)."""
-    return np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
-
-
-def stacked_skew(vectors: np.ndarray) -> np.ndarray:
-    """``(3k, 3)``: the cross-product matrices of ``k`` vectors stacked vertically."""
-    k = len(vectors)
-    matrices = np.zeros((k, 3, 3))
-    x, y, z = vectors[:, 0], vectors[:, 1], vectors[:, 2]
-    matrices[:, 0, 1], matrices[:, 0, 2] = -z, y
-    matrices[:, 1, 0], matrices[:, 1, 2] = z, -x
-    matrices[:, 2, 0], matrices[:, 2, 1] = -y, x
-    return matrices.reshape(3 * k, 3)
+__all__ = ["cross", "wrench_map"]
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -210,6 +210,35 @@ def test_controller_like_problem_with_untracked_unknowns(seed: int) -> None:
     )
 
 
+def check_optimal_on_the_constraint_set(
+    objectives: list[Objective],
+    equality: Equality,
+    problem: WeightedProblem,
+    solution: KKTSolution,
+) -> None:
+    """Optimal on ``C x = d`` (eq. D.8); feasible, or, with damped constraints, within the bound."""
+    n, p = problem.hessian.shape[0], equality.C.shape[0]
+    H, g = reference_normal_equations(objectives, n, solution.objective_damping**2)
+    assert solution.found
+    assert np.all(np.isfinite(solution.x))
+    scale = scale_of(H) * scale_of(solution.x) + scale_of(g)
+    # Optimal on the constraint set (eq. D.8: M x − u lies in the span of Cᵀ), damped or not.
+    N = scipy.linalg.null_space(equality.C) if p else np.eye(n)
+    np.testing.assert_allclose(N.T @ (H @ solution.x - g), np.zeros(N.shape[1]), atol=1e-9 * scale)
+    if solution.constraint_damping == 0:  # feasible
+        np.testing.assert_allclose(
+            equality.C @ solution.x,
+            equality.d,
+            atol=1e-9 * scale_of(equality.C) * scale_of(solution.x, equality.d),
+        )
+    else:  # near-singular constraints: the correction obeys the gain bound instead
+        x_free = np.linalg.solve(H, g)
+        correction = solution.x - x_free
+        correction_norm = float(np.sqrt(max(float(correction @ H @ correction), 0.0)))
+        gap = float(np.linalg.norm(equality.d - equality.C @ x_free))
+        assert correction_norm <= problem.constraint_gain_bound * gap * (1 + 1e-6) + 1e-9 * scale
+
+
 @settings(max_examples=300, deadline=None)
 @given(
     seed=st.integers(0, 2**32 - 1),
@@ -224,19 +253,26 @@ def test_solution_is_feasible_and_optimal_on_the_constraint_set(
     p = int(constraint_fraction * n)
     objectives = random_objectives(rng, n, objective_count)
     equality = random_equality(rng, n, p)
-    _, solution = build_and_solve(objectives, equality)
-
-    H, g = reference_normal_equations(objectives, n, solution.objective_damping**2)
-    assert solution.found
-    assert np.all(np.isfinite(solution.x))
-    if solution.constraint_damping > 0:
-        return  # near-singular constraints: covered by the damped-least-squares tests
-    scale = scale_of(H) * scale_of(solution.x) + scale_of(g)
-    np.testing.assert_allclose(
-        equality.C @ solution.x,
-        equality.d,
-        atol=1e-9 * scale_of(equality.C) * scale_of(solution.x, equality.d),
-    )
-    N = scipy.linalg.null_space(equality.C) if p else np.eye(n)
-    np.testing.assert_allclose(N.T @ (H @ solution.x - g), np.zeros(N.shape[1]), atol=1e-9 * scale)
+    problem, solution = build_and_solve(objectives, equality)
+    check_optimal_on_the_constraint_set(objectives, equality, problem, solution)
     assert solution.schur_condition_number >= 1.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(3, 15),
+    log_gap=st.floats(-12.0, -6.0),
+)
+def test_near_dependent_constraints_are_damped_within_the_gain_bound(
+    seed: int, n: int, log_gap: float
+) -> None:
+    """Two constraint rows 10⁻¹²–10⁻⁶ apart (a support at a singularity): damped, bounded."""
+    rng = np.random.default_rng(seed)
+    C = rng.normal(size=(2, n))
+    C[1] = C[0] + 10.0**log_gap * rng.normal(size=n)
+    equality = Equality(C, rng.normal(size=2))
+    objectives = random_objectives(rng, n, 2)
+    problem, solution = build_and_solve(objectives, equality)
+    assert solution.constraint_damping > 0
+    check_optimal_on_the_constraint_set(objectives, equality, problem, solution)
