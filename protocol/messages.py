@@ -332,7 +332,8 @@ class Diagnostics(_Strict):
         frame="world",
     )
     angular_momentum_weight: float = wire_field(
-        "β_ba = β_0 + γ ‖p − g‖ used this tick (eq. 5.17; β_0 = 0 in the thesis)."
+        "β_ba = β_0 + γ ‖p − g‖ used this tick (eq. 5.17; β_0 = 0 in the thesis); NaN for "
+        "`prioritized`, whose angular momentum objective has a fixed weight α."
     )
     objective_residuals: dict[str, float] = wire_field(
         "Per objective, the weighted residual ‖W (A q̈ − b)‖ at the returned q̈."

@@ -553,7 +553,7 @@ class PrioritizedController(Controller):
             "centroidal_moment_pivot": cmp_,
             "supports": list(flags),
             "support_polygon_xy": layout.support_polygon.reshape(-1),
-            "angular_momentum_weight": p["weight_angular_momentum"],
+            "angular_momentum_weight": math.nan,  # β_ba is eq. 5.17's; here α is fixed
             "objective_residuals": {name: o.residual(x) for name, o in objectives.items()},
             "objective_condition_number": math.nan,
             "schur_condition_number": math.nan,
