@@ -1,6 +1,6 @@
 """Conversions between wire conventions and Pinocchio's, at the session edge.
 
-Wire (ARCHITECTURE.md): base pose in world, quaternions scalar-last,
+Wire (docs/architecture.md): base pose in world, quaternions scalar-last,
 ``linear_velocity_base_in_world``, ``angular_velocity_base_in_base``.
 Pinocchio's free flyer: ``q = [p, quat_xyzw, q_joints]`` and
 ``v = [v_base_in_base, ω_base_in_base, v_joints]``. Accelerations go back as

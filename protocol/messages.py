@@ -2,7 +2,7 @@
 
 One pydantic model per message ``type``. Every message carries ``version``
 (:data:`PROTOCOL_VERSION`) and ``seq``; every reply echoes the ``seq`` of its
-request. Conventions (ARCHITECTURE.md): SI units, world frame z up, base pose
+request. Conventions (docs/architecture.md): SI units, world frame z up, base pose
 in world, quaternions scalar-last ``[x, y, z, w]``, joint order as announced
 in ``welcome``. Every field declares its shape, unit and frame, and
 ``docs/protocol.md`` is generated from them (``python -m protocol.docgen``).
