@@ -1,18 +1,56 @@
-"""Errors raised by the controller server, each mapping to a wire error code."""
+"""The server's own errors; the edge (`session_table`) maps them to wire codes.
+
+Models, files, controllers and sessions raise these, knowing nothing of the
+wire: :func:`wire_code` is the one table from an error to the ``error``
+message's code. Every one carries the request field it concerns and a
+one-line detail.
+"""
 
 from __future__ import annotations
 
-from protocol.errors import ErrorCode, ProtocolError
+from protocol.errors import ErrorCode, PoiseError
 
-__all__ = ["FrameNotFound", "InvalidParams", "ModelError"]
+__all__ = [
+    "ControllerFailed",
+    "FileTooLarge",
+    "FrameNotFound",
+    "InvalidParams",
+    "ModelError",
+    "ModelMismatch",
+    "ModelNotFound",
+    "ServerFault",
+    "UnknownController",
+    "wire_code",
+]
 
 
-class ModelError(ProtocolError):
-    """A robot model could not be found, parsed or used."""
+class ServerFault(PoiseError):
+    """A request the server cannot serve as asked.
 
-    def __init__(self, detail: str, *, not_found: bool = False, field: str = "model"):
-        code = ErrorCode.MODEL_NOT_FOUND if not_found else ErrorCode.MODEL_INVALID
-        super().__init__(code, field, detail)
+    Attributes:
+        field: The request field at fault (``"model"``, ``"params.stiffness"``).
+        detail: One line: what is wrong and what would do.
+    """
+
+    def __init__(self, field: str, detail: str):
+        self.field = field
+        self.detail = detail
+        super().__init__(f"{field}: {detail}")
+
+
+class ModelError(ServerFault):
+    """A robot model could not be parsed or used."""
+
+    def __init__(self, detail: str, *, field: str = "model"):
+        super().__init__(field, detail)
+
+
+class ModelNotFound(ModelError):
+    """No built-in model and no allowed file of that name."""
+
+
+class ModelMismatch(ModelError):
+    """The client expects another model (its ``expected_model_hash`` differs)."""
 
 
 class FrameNotFound(ModelError):
@@ -22,13 +60,47 @@ class FrameNotFound(ModelError):
         self.name = name
         self.available = available
         super().__init__(
-            f"frame {name!r} not in model; available: {', '.join(available)}",
-            field="contacts",
+            f"frame {name!r} not in model; available: {', '.join(available)}", field="contacts"
         )
 
 
-class InvalidParams(ProtocolError):
+class InvalidParams(ServerFault):
     """A controller parameter is unknown or has a bad value."""
 
-    def __init__(self, field: str, detail: str):
-        super().__init__(ErrorCode.INVALID_PARAMS, field, detail)
+
+class UnknownController(ServerFault):
+    """No controller has the name a ``hello`` gives."""
+
+
+class FileTooLarge(ServerFault):
+    """A model or clip file exceeds the server's size cap."""
+
+
+class ControllerFailed(ServerFault):
+    """A controller found no command for a valid request; the session is kept.
+
+    Raised instead of numerical exceptions (``LinAlgError``, a solver giving up), with one
+    line saying what failed, so that no tick ends in an untyped error.
+    """
+
+    def __init__(self, detail: str):
+        super().__init__("controller", detail)
+
+
+_WIRE_CODES: dict[type[ServerFault], ErrorCode] = {
+    ModelNotFound: ErrorCode.MODEL_NOT_FOUND,
+    ModelMismatch: ErrorCode.MODEL_MISMATCH,
+    ModelError: ErrorCode.MODEL_INVALID,
+    InvalidParams: ErrorCode.INVALID_PARAMS,
+    UnknownController: ErrorCode.UNKNOWN_CONTROLLER,
+    FileTooLarge: ErrorCode.LIMIT_EXCEEDED,
+    ControllerFailed: ErrorCode.INTERNAL,
+}
+
+
+def wire_code(error: ServerFault) -> ErrorCode:
+    """The wire code of ``error``: its class's, or its nearest base's in the table."""
+    for cls in type(error).__mro__:
+        if cls in _WIRE_CODES:
+            return _WIRE_CODES[cls]
+    return ErrorCode.INTERNAL

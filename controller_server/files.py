@@ -17,7 +17,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from protocol.errors import ErrorCode, ProtocolError
+from controller_server.errors import FileTooLarge, ServerFault
 
 __all__ = [
     "DEFAULT_MAX_FILE_BYTES",
@@ -107,9 +107,9 @@ class ServerFileKind:
     field: str
     builtin: Mapping[str, Path]
     suffixes: tuple[str, ...]
-    not_found: Callable[[str], ProtocolError]
+    not_found: Callable[[str], ServerFault]
 
-    def refusal(self, name: str) -> ProtocolError:
+    def refusal(self, name: str) -> ServerFault:
         """The one error for every name that is not a built-in nor an allowed file."""
         return self.not_found(
             f"{display_name(name)} is not a built-in {self.kind} ({', '.join(self.builtin)}) "
@@ -131,7 +131,7 @@ class ServerFileKind:
             The built-in's package path, or the resolved path of the file.
 
         Raises:
-            ProtocolError: :meth:`refusal` for every other name (empty, NUL,
+            ServerFault: :meth:`refusal` for every other name (empty, NUL,
                 longer than :data:`MAX_NAME_LENGTH`, missing, outside,
                 unreadable, not a regular file).
         """
@@ -159,8 +159,8 @@ class ServerFileKind:
             The path (as :meth:`resolve`) and the file's bytes.
 
         Raises:
-            ProtocolError: :meth:`refusal` if the name is refused or the file
-                cannot be read; ``LIMIT_EXCEEDED`` if it is larger than
+            ServerFault: :meth:`refusal` if the name is refused or the file
+                cannot be read; :class:`FileTooLarge` if it is larger than
                 :func:`max_file_bytes`.
         """
         path = self.resolve(name)
@@ -189,9 +189,8 @@ class ServerFileKind:
         except UnicodeDecodeError:
             raise self.refusal(name) from None
 
-    def _too_large(self, limit: int) -> ProtocolError:
-        return ProtocolError(
-            ErrorCode.LIMIT_EXCEEDED,
+    def _too_large(self, limit: int) -> FileTooLarge:
+        return FileTooLarge(
             self.field,
             f"the {self.kind} file exceeds the server's limit of {limit} bytes",
         )

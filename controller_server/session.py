@@ -10,9 +10,9 @@ from collections import deque
 import numpy as np
 
 from controller_server.controllers import create_controller
+from controller_server.errors import ModelMismatch
 from controller_server.models import load_robot_model
 from controller_server.wire import command_from_output, control_input_from_state
-from protocol.errors import ErrorCode, ProtocolError
 from protocol.messages import Command, Hello, Params, SessionStats, SetParams, State, Welcome
 
 __all__ = ["Session"]
@@ -28,8 +28,9 @@ class Session:
         """Load the model and create the controller named in ``hello``.
 
         Raises:
-            ProtocolError: Model not found/invalid/mismatched, unknown
-                controller, or invalid initial parameters.
+            ServerFault: Model not found, invalid or mismatched
+                (:mod:`controller_server.errors`), unknown controller, or invalid
+                initial parameters.
         """
         self.robot = load_robot_model(
             hello.model,
@@ -41,12 +42,10 @@ class Session:
             hello.expected_model_hash is not None
             and hello.expected_model_hash != self.robot.model_hash
         ):
-            raise ProtocolError(
-                ErrorCode.MODEL_MISMATCH,
-                "expected_model_hash",
+            raise ModelMismatch(
                 f"client expects {hello.expected_model_hash[:12]}…, server model "
                 f"{self.robot.name!r} is {self.robot.model_hash[:12]}…",
-                hello.seq,
+                field="expected_model_hash",
             )
         self.controller = create_controller(hello.controller, self.robot, hello.params)
         self.diagnostics_period_ticks = hello.diagnostics_period_ticks

@@ -5,8 +5,9 @@ named by an opaque key, into one reply message. It never raises for bad
 input: every problem becomes a typed ``error`` naming the field. ``hello``
 creates (or replaces) the key's session, ``state`` → ``command``,
 ``set_params`` → ``params``, ``stats`` → ``stats``, ``bye`` closes the
-session. Which client a key belongs to, caps, deadlines and expiry are the
-broker's business (:mod:`controller_server.server`).
+session. The server's own errors (:mod:`controller_server.errors`) become
+wire codes here, at the edge. Which client a key belongs to, caps, deadlines
+and expiry are the broker's business (:mod:`controller_server.server`).
 
 With a ``record_dir``, every session's conversation (the requests it
 received, the replies it sent) is recorded to its own MCAP file, opened by
@@ -24,6 +25,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from controller_server.errors import ServerFault, wire_code
 from protocol.codec import decode
 from protocol.errors import ErrorCode, ProtocolError
 from protocol.messages import Bye, Error, Hello, Message, SessionStats, SetParams, State, Stats
@@ -98,10 +100,8 @@ class SessionTable:
             request = decode(payload)
             seq = request.seq
             return request, self._dispatch(key, request)
-        except ProtocolError as exc:
-            session = self.sessions.get(key)
-            if session is not None:
-                session.errors += 1
+        except ProtocolError as exc:  # the request itself is malformed
+            self._count_error(key)
             error = Error(
                 seq=exc.seq if exc.seq >= 0 else seq,
                 code=exc.code,
@@ -109,10 +109,18 @@ class SessionTable:
                 detail=exc.detail,
             )
             return request, error
+        except ServerFault as exc:  # the server cannot serve it: mapped to a wire code here
+            self._count_error(key)
+            return request, Error(seq=seq, code=wire_code(exc), field=exc.field, detail=exc.detail)
         except Exception as exc:  # a controller bug must not take the server down
             log.exception("internal error while serving a request")
             error = Error(seq=seq, code=ErrorCode.INTERNAL, detail=f"{type(exc).__name__}: {exc}")
             return request, error
+
+    def _count_error(self, key: bytes) -> None:
+        session = self.sessions.get(key)
+        if session is not None:
+            session.errors += 1
 
     def drop(self, keys: Iterable[bytes]) -> int:
         """Forget these sessions (expired, replaced, closed) and close their logs; how many."""

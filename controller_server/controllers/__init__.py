@@ -6,8 +6,8 @@ from typing import Any
 from controller_server.controllers.base import ControlInput, Controller, ControlOutput, ParamSpec
 from controller_server.controllers.momentum import MomentumController, TrackingController
 from controller_server.controllers.prioritized import PrioritizedController
+from controller_server.errors import UnknownController
 from controller_server.models import RobotModel
-from protocol.errors import ErrorCode, ProtocolError
 
 __all__ = [
     "CONTROLLERS",
@@ -33,13 +33,9 @@ def create_controller(
     """Instantiate the controller called ``name`` for ``robot``.
 
     Raises:
-        ProtocolError: ``UNKNOWN_CONTROLLER`` if no controller has that name.
+        UnknownController: No controller has that name.
     """
     cls = CONTROLLERS.get(name)
     if cls is None:
-        raise ProtocolError(
-            ErrorCode.UNKNOWN_CONTROLLER,
-            "controller",
-            f"{name=!r}; available: {sorted(CONTROLLERS)}",
-        )
+        raise UnknownController("controller", f"{name=!r}; available: {sorted(CONTROLLERS)}")
     return cls(robot, params)

@@ -19,9 +19,8 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.dynamics import DynamicsTerms
-from controller_server.errors import InvalidParams
+from controller_server.errors import ControllerFailed, InvalidParams
 from controller_server.models import RobotModel
-from protocol.errors import ErrorCode, ProtocolError
 
 __all__ = [
     "CONTACT_PARAMETERS",
@@ -34,17 +33,6 @@ __all__ = [
     "normalized_configuration_part",
     "vector_value",
 ]
-
-
-class ControllerFailed(ProtocolError):
-    """A controller found no command for a valid request (``INTERNAL``; the session is kept).
-
-    Raised instead of numerical exceptions (``LinAlgError``, a solver giving up), with one
-    line saying what failed, so that no tick ends in an untyped error.
-    """
-
-    def __init__(self, detail: str):
-        super().__init__(ErrorCode.INTERNAL, "controller", detail)
 
 
 def check_finite_dynamics(terms: DynamicsTerms) -> None:

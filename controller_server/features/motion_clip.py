@@ -435,7 +435,7 @@ def load_motion_clip(path_or_name: str | Path, robot: RobotModel) -> MotionClip:
             message whatever the reason), bad JSON, other joints, wrong row
             lengths, non-finite values, non-increasing times or fewer than 2
             frames. Messages name the clip as given, never its server path.
-        ProtocolError: ``LIMIT_EXCEEDED`` for a file over the size cap.
+        FileTooLarge: A file over the size cap.
     """
     name = os.fspath(path_or_name)
     _, text = CLIP_FILES.read_text(name)

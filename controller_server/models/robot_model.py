@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from controller_server.errors import FrameNotFound, ModelError
+from controller_server.errors import FrameNotFound, ModelError, ModelNotFound
 from controller_server.files import ServerFileKind
 from protocol.messages import ContactSpec, JointInfo
 
@@ -58,7 +58,7 @@ MODEL_FILES = ServerFileKind(
     field="model",
     builtin=BUILTIN_MODELS,
     suffixes=(".xml", ".urdf"),
-    not_found=lambda detail: ModelError(detail, not_found=True),
+    not_found=ModelNotFound,
 )
 """The model files a ``hello`` may name: built-ins, or files in the model directories."""
 
@@ -336,7 +336,7 @@ def load_robot_model(
     Raises:
         ModelError: Not found (one message whatever the reason), not
             parseable, unsupported joints or no contacts.
-        ProtocolError: ``LIMIT_EXCEEDED`` for a file over the size cap.
+        FileTooLarge: A file over the size cap.
     """
     if model_text is not None:
         text = model_text.encode()

@@ -18,7 +18,7 @@ import qpsolvers
 
 from controller_server.controllers import CONTROLLERS, ControlInput, create_controller
 from controller_server.controllers.base import ControllerFailed
-from controller_server.errors import InvalidParams
+from controller_server.errors import InvalidParams, ServerFault, wire_code
 from controller_server.features import Objective
 from controller_server.models import load_robot_model
 from controller_server.session import Session
@@ -29,7 +29,7 @@ from controller_server.solvers.prioritized import (
     solve_prioritized,
     solve_qp_bounded,
 )
-from protocol.errors import ErrorCode, ProtocolError
+from protocol.errors import ErrorCode
 from protocol.messages import Hello, SetParams
 
 CONTROLLER_NAMES = ("momentum", "tracking", "prioritized")
@@ -73,9 +73,9 @@ def check_outcome(robot, controller, control_input) -> str:
     """A finite command within the torque limits, or a typed INTERNAL error: which one."""
     try:
         output = controller.compute(control_input)
-    except ProtocolError as error:  # anything else (LinAlgError, ValueError) fails the test
+    except ServerFault as error:  # anything else (LinAlgError, ValueError) fails the test
         assert isinstance(error, ControllerFailed)
-        assert error.code == ErrorCode.INTERNAL
+        assert wire_code(error) == ErrorCode.INTERNAL
         assert error.field == "controller"
         assert "\n" not in error.detail
         return "error"
@@ -260,7 +260,7 @@ def test_non_finite_and_boolean_numbers_are_invalid_params(robot, name, key):
         with pytest.raises(InvalidParams) as set_params:
             controller.set_params({key: value})
         for error in (hello.value, set_params.value):
-            assert error.code == ErrorCode.INVALID_PARAMS
+            assert wire_code(error) == ErrorCode.INVALID_PARAMS
             assert error.field == f"params.{key}"
     assert controller.parameters() == before
 
@@ -269,13 +269,13 @@ def test_non_finite_and_boolean_numbers_are_invalid_params(robot, name, key):
 def test_optimizer_period_ticks_is_checked_in_hello_and_set_params(value):
     """inf and NaN used to reach int() and end as INTERNAL errors."""
     params = {"optimizer_period_ticks": value}
-    with pytest.raises(ProtocolError) as hello:
+    with pytest.raises(ServerFault) as hello:
         Session(Hello(model="thesis_humanoid", controller="momentum", params=params))
     session = Session(Hello(model="thesis_humanoid", controller="momentum"))
-    with pytest.raises(ProtocolError) as set_params:
+    with pytest.raises(ServerFault) as set_params:
         session.set_params(SetParams(params=params))
     for error in (hello.value, set_params.value):
-        assert error.code == ErrorCode.INVALID_PARAMS
+        assert wire_code(error) == ErrorCode.INVALID_PARAMS
         assert error.field == "params.optimizer_period_ticks"
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from controller_server.errors import FrameNotFound, ModelError
+from controller_server.errors import FrameNotFound, ModelError, wire_code
 from controller_server.models import BUILTIN_MODELS, RobotModel, load_robot_model
 from protocol.errors import ErrorCode
 from protocol.messages import ContactSpec
@@ -196,7 +196,7 @@ def test_urdf_text_with_contacts_uses_effort_limits() -> None:
 def test_urdf_without_contacts_is_refused() -> None:
     with pytest.raises(ModelError) as error:
         load_robot_model(model_text=TINY_URDF, model_format="urdf")
-    assert error.value.code == ErrorCode.MODEL_INVALID
+    assert wire_code(error.value) == ErrorCode.MODEL_INVALID
     assert error.value.field == "contacts"
 
 
@@ -204,7 +204,7 @@ def test_unknown_path_is_model_not_found(tmp_path, allow_model_dir) -> None:
     allow_model_dir(tmp_path)
     with pytest.raises(ModelError) as error:
         load_robot_model("no_such_robot.xml")
-    assert error.value.code == ErrorCode.MODEL_NOT_FOUND
+    assert wire_code(error.value) == ErrorCode.MODEL_NOT_FOUND
     assert error.value.field == "model"
     assert "'no_such_robot.xml'" in error.value.detail
 
@@ -214,14 +214,14 @@ def test_unknown_path_is_model_not_found(tmp_path, allow_model_dir) -> None:
 def test_malformed_xml_is_model_invalid(text: str, model_format: str) -> None:
     with pytest.raises(ModelError) as error:
         load_robot_model(model_text=text, model_format=model_format)
-    assert error.value.code == ErrorCode.MODEL_INVALID
+    assert wire_code(error.value) == ErrorCode.MODEL_INVALID
 
 
 def test_mjcf_without_sole_sites_needs_contacts() -> None:
     text = TINY_MJCF.replace("_sole", "_ankle")
     with pytest.raises(ModelError) as error:
         load_robot_model(model_text=text)
-    assert error.value.code == ErrorCode.MODEL_INVALID
+    assert wire_code(error.value) == ErrorCode.MODEL_INVALID
     assert error.value.field == "contacts"
 
 
@@ -229,7 +229,7 @@ def test_contact_on_missing_frame_is_frame_not_found() -> None:
     spec = ContactSpec(name="hand", frame="no_such_frame", points_in_frame=[(0.0, 0.0, 0.0)])
     with pytest.raises(FrameNotFound) as error:
         load_robot_model("revolute_humanoid", contacts=[spec])
-    assert error.value.code == ErrorCode.MODEL_INVALID
+    assert wire_code(error.value) == ErrorCode.MODEL_INVALID
     assert error.value.name == "no_such_frame"
     assert "left_sole" in error.value.available and "right_sole" in error.value.available
 

@@ -5,11 +5,11 @@ import pinocchio as pin
 import pytest
 
 from controller_server.controllers import ControlInput, MomentumController
-from controller_server.errors import InvalidParams
+from controller_server.errors import InvalidParams, ServerFault, wire_code
 from controller_server.features import load_motion_clip
 from controller_server.models import BUILTIN_MODELS, load_robot_model
 from controller_server.session import Session
-from protocol import ErrorCode, ProtocolError
+from protocol import ErrorCode
 from protocol.messages import Hello, SetParams
 from tests.helpers import IndependentDynamics, random_state
 
@@ -224,9 +224,9 @@ def test_point_targets_are_added_moved_and_removed_at_run_time():
 def test_invalid_parameters_are_refused_and_nothing_changes(params, field):
     session = Session(Hello(model="thesis_humanoid", controller="momentum"))
     before = session.controller.parameters()
-    with pytest.raises(ProtocolError) as info:
+    with pytest.raises(ServerFault) as info:
         session.set_params(SetParams(params={"stiffness": 42.0, **params}))
-    assert info.value.code == ErrorCode.INVALID_PARAMS
+    assert wire_code(info.value) == ErrorCode.INVALID_PARAMS
     assert info.value.field == field
     assert session.controller.parameters() == before
 
@@ -277,7 +277,7 @@ def test_measured_mode_compensates_the_clients_wrenches():
         com = command.diagnostics.position_com_in_world
         np.testing.assert_allclose(cmp_[:2], com[:2] - force[:2] / force[2] * com[2], atol=1e-9)
     without = random_state(welcome, rng)
-    with pytest.raises(ProtocolError) as info:
+    with pytest.raises(ServerFault) as info:
         session.step(without)
     assert info.value.field == "contact_wrench_in_world"
 

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 import controller_server
 from controller_server import files
-from controller_server.errors import InvalidParams, ModelError
+from controller_server.errors import InvalidParams, ModelError, ServerFault, wire_code
 from controller_server.features.motion_clip import CLIP_FILES, load_motion_clip
 from controller_server.files import display_name, set_model_directories
 from controller_server.models import (
@@ -29,7 +29,7 @@ from controller_server.models import (
     load_robot_model,
     set_model_cache_size,
 )
-from protocol.errors import ErrorCode, ProtocolError
+from protocol.errors import ErrorCode
 from tests.controller_server.test_model_loading import TINY_MJCF, TINY_URDF
 
 SECRET = "planted-secret-5f1c9"
@@ -114,7 +114,7 @@ def refused_names(layout: dict[str, Path], suffix: str) -> list[str]:
     ]
 
 
-def assert_refusals_look_alike(errors: dict[str, ProtocolError]) -> None:
+def assert_refusals_look_alike(errors: dict[str, ServerFault]) -> None:
     """One detail for every name, with no server path besides the name the client sent."""
     templates = {
         name: error.detail.replace(display_name(name), "NAME") for name, error in errors.items()
@@ -133,7 +133,9 @@ def test_refused_model_names_are_model_not_found_with_one_message(layout):
     for name in refused_names(layout, ".xml"):
         with pytest.raises(ModelError) as info:
             load_robot_model(name)
-        assert (info.value.code, info.value.field) == (ErrorCode.MODEL_NOT_FOUND, "model"), name
+        assert (wire_code(info.value), info.value.field) == (ErrorCode.MODEL_NOT_FOUND, "model"), (
+            name
+        )
         errors[name] = info.value
     assert_refusals_look_alike(errors)
 
@@ -143,7 +145,10 @@ def test_refused_clip_names_are_invalid_params_with_one_message(layout, thesis):
     for name in refused_names(layout, ".json"):
         with pytest.raises(InvalidParams) as info:
             load_motion_clip(name, thesis)
-        assert (info.value.code, info.value.field) == (ErrorCode.INVALID_PARAMS, "params.clip")
+        assert (wire_code(info.value), info.value.field) == (
+            ErrorCode.INVALID_PARAMS,
+            "params.clip",
+        )
         errors[name] = info.value
     assert_refusals_look_alike(errors)
 
@@ -174,7 +179,7 @@ def test_without_model_directories_only_builtins_load(tmp_path, allow_model_dir)
     (tmp_path / "tiny.xml").write_text(TINY_MJCF)
     with pytest.raises(ModelError) as info:
         load_robot_model(str(tmp_path / "tiny.xml"))
-    assert info.value.code == ErrorCode.MODEL_NOT_FOUND
+    assert wire_code(info.value) == ErrorCode.MODEL_NOT_FOUND
     assert load_robot_model("dino_biped").name == "dino_biped"
 
 
@@ -278,7 +283,7 @@ def test_parser_errors_name_the_model_not_a_server_path(layout, file_name, text)
     (layout["allowed"] / file_name).write_text(text)
     with pytest.raises(ModelError) as info:
         load_robot_model(file_name)
-    assert info.value.code == ErrorCode.MODEL_INVALID
+    assert wire_code(info.value) == ErrorCode.MODEL_INVALID
     detail = info.value.detail
     assert "/" not in detail and "poise-model" not in detail and "From file" not in detail
     if file_name.endswith(".urdf"):
@@ -301,9 +306,9 @@ def test_files_over_the_size_cap_are_limit_exceeded(layout, allow_model_dir, the
         (load_robot_model, "tiny.xml", "model"),
         (lambda n: load_motion_clip(n, thesis), "still.json", "params.clip"),
     ):
-        with pytest.raises(ProtocolError) as info:
+        with pytest.raises(ServerFault) as info:
             load(name)
-        assert (info.value.code, info.value.field) == (ErrorCode.LIMIT_EXCEEDED, field)
+        assert (wire_code(info.value), info.value.field) == (ErrorCode.LIMIT_EXCEEDED, field)
         assert "100 bytes" in info.value.detail
     # Refused names stay refused (not a size error that would confirm they exist).
     with pytest.raises(ModelError):
