@@ -1,1 +1,3 @@
-"""Poise controller server: robot models, controllers and the ZeroMQ server."""
+"""Poise controller server: robot models, controllers and the ZeroMQ server (submodules)."""
+
+__all__: list[str] = []

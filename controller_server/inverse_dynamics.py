@@ -48,6 +48,7 @@ from controller_server.spatial import wrench_map
 
 __all__ = [
     "InverseDynamicsResult",
+    "exact_inverse_dynamics",
     "friction_pyramid",
     "minimum_norm_balance",
     "nearest_feasible_motion",

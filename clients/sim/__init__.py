@@ -1,1 +1,3 @@
-"""Simulator client: physics backends, scenarios, metrics."""
+"""Simulator client: physics backends, scenarios, metrics (import the submodules)."""
+
+__all__: list[str] = []

@@ -79,7 +79,7 @@ from controller_server.inverse_dynamics import (
 from controller_server.models import RobotModel
 from controller_server.solvers import KKTSolution, build_weighted_problem, solve_weighted_kkt
 
-__all__ = ["MomentumController", "TrackingController"]
+__all__ = ["POINT_DEFAULTS", "POINT_PREFIX", "MomentumController", "TrackingController"]
 
 POINT_PREFIX = "point:"
 POINT_DEFAULTS: dict[str, Any] = {

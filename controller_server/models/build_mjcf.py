@@ -55,6 +55,20 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+__all__ = [
+    "Body",
+    "Joint",
+    "box_inertia_kgm2",
+    "build_dino_biped",
+    "build_revolute_humanoid",
+    "build_thesis_humanoid",
+    "main",
+    "pitch_quat",
+    "render",
+    "render_all",
+    "water_box_m",
+]
+
 Vec3 = tuple[float, float, float]
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
