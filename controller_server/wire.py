@@ -17,7 +17,14 @@ from controller_server.controllers import ControlInput, ControlOutput
 from controller_server.models import RobotModel
 from controller_server.spatial import cross
 from protocol.errors import ErrorCode, ProtocolError
-from protocol.messages import Command, Diagnostics, PriorityLevelReport, State
+from protocol.messages import (
+    Command,
+    Diagnostics,
+    PrioritizedDiagnostics,
+    PriorityLevelReport,
+    State,
+    WeightedDiagnostics,
+)
 
 __all__ = ["command_from_output", "control_input_from_state"]
 
@@ -133,10 +140,16 @@ def command_from_output(
     values = output.diagnostics
     if values is None:
         return Command.model_construct(seq=seq, diagnostics=None, **arrays)
-    if values.get("priority_levels") is not None:
+    values = dict(values)
+    if values.get("weighted") is not None:
+        values["weighted"] = WeightedDiagnostics.model_construct(**values["weighted"])
+    if values.get("prioritized") is not None:
+        section = values["prioritized"]
         levels = [
-            PriorityLevelReport.model_construct(**level) for level in values["priority_levels"]
+            PriorityLevelReport.model_construct(**level) for level in section["priority_levels"]
         ]
-        values = {**values, "priority_levels": levels}
+        values["prioritized"] = PrioritizedDiagnostics.model_construct(
+            **{**section, "priority_levels": levels}
+        )
     diagnostics = Diagnostics.model_construct(compute_time_s=compute_time_s, **values)
     return Command.model_construct(seq=seq, diagnostics=diagnostics, **arrays)

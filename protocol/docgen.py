@@ -20,8 +20,10 @@ from protocol.messages import (
     ContactSpec,
     Diagnostics,
     JointInfo,
+    PrioritizedDiagnostics,
     PriorityLevelReport,
     SessionStats,
+    WeightedDiagnostics,
 )
 
 __all__ = ["render_protocol_doc"]
@@ -115,7 +117,15 @@ def render_protocol_doc() -> str:
     sections = [INTRO]
     for kind, cls in MESSAGE_TYPES.items():
         sections.append(f"## `{kind}`\n\n{(cls.__doc__ or '').strip()}\n\n{_table(cls)}\n")
-    for part in (ContactSpec, JointInfo, Diagnostics, PriorityLevelReport, SessionStats):
+    for part in (
+        ContactSpec,
+        JointInfo,
+        Diagnostics,
+        WeightedDiagnostics,
+        PrioritizedDiagnostics,
+        PriorityLevelReport,
+        SessionStats,
+    ):
         sections.append(f"## {part.__name__}\n\n{(part.__doc__ or '').strip()}\n\n{_table(part)}\n")
     errors = ["| code | name | meaning |", "|---|---|---|"]
     errors += [f"| {int(c)} | `{c.name}` | {c.description} |" for c in ErrorCode]

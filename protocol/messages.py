@@ -48,16 +48,18 @@ __all__ = [
     "JointInfo",
     "Message",
     "Params",
+    "PrioritizedDiagnostics",
     "PriorityLevelReport",
     "SessionStats",
     "SetParams",
     "State",
     "Stats",
+    "WeightedDiagnostics",
     "Welcome",
     "wire_field",
 ]
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 """Version of this wire contract; a message with another version is refused."""
 
 ParamValue = float | int | bool | str | list[float] | dict[str, float | str | list[float]] | None
@@ -274,13 +276,49 @@ class PriorityLevelReport(_Strict):
     used_qp: bool = wire_field("Whether an inequality was active, so a QP was solved.")
 
 
-class Diagnostics(_Strict):
-    """What the controller did this tick (for logs and plots)."""
+class WeightedDiagnostics(_Strict):
+    """The weighted controllers' own diagnostics (`momentum`, `tracking`): App. D's solve."""
 
-    compute_time_s: float = wire_field("Server time spent on this tick.", unit="s")
     optimizer_ran: bool = wire_field(
         "Whether the optimizer ran this tick (else the last accelerations were reused)."
     )
+    angular_momentum_weight: float = wire_field(
+        "β_ba = β_0 + γ ‖p − g‖ used this tick (eq. 5.17; β_0 = 0 in the thesis)."
+    )
+    objective_condition_number: float = wire_field(
+        "Condition number of the damped objective Hessian M (App. D), LAPACK's 1-norm estimate.",
+        unit="1",
+    )
+    schur_condition_number: float = wire_field(
+        "Condition number of C M⁻¹ Cᵀ before damping (App. D, eq. D.7): LAPACK's 1-norm "
+        "estimate, or the eigenvalue ratio when damped.",
+        unit="1",
+    )
+    objective_damping: float = wire_field("Damping λ on the objective stack (Maciejewski eq. 15).")
+    constraint_damping: float = wire_field(
+        "Damping λ on the Schur complement (Maciejewski eq. 15)."
+    )
+
+
+class PrioritizedDiagnostics(_Strict):
+    """The prioritized controller's own diagnostics: Algorithm 1's levels, the inequalities."""
+
+    priority_levels: list[PriorityLevelReport] = wire_field(
+        "One report per level, highest priority first (level 0 is the equations of motion)."
+    )
+    inequality_violation: float = wire_field(
+        "max(0, −(D x + f)) over λ ≥ 0, non-penetration, torque and joint limits."
+    )
+
+
+class Diagnostics(_Strict):
+    """What the controller did this tick (for logs and plots).
+
+    What every controller reports, and one section of its own (``weighted`` or
+    ``prioritized``).
+    """
+
+    compute_time_s: float = wire_field("Server time spent on this tick.", unit="s")
     position_com_in_world: Vector3 = wire_field(
         "Centre of mass.", shape="3", unit="m", frame="world"
     )
@@ -331,26 +369,8 @@ class Diagnostics(_Strict):
         unit="m",
         frame="world",
     )
-    angular_momentum_weight: float = wire_field(
-        "β_ba = β_0 + γ ‖p − g‖ used this tick (eq. 5.17; β_0 = 0 in the thesis); NaN for "
-        "`prioritized`, whose angular momentum objective has a fixed weight α."
-    )
     objective_residuals: dict[str, float] = wire_field(
         "Per objective, the weighted residual ‖W (A q̈ − b)‖ at the returned q̈."
-    )
-    objective_condition_number: float = wire_field(
-        "Condition number of the damped objective Hessian M (App. D), LAPACK's 1-norm "
-        "estimate; NaN for `prioritized`.",
-        unit="1",
-    )
-    schur_condition_number: float = wire_field(
-        "Condition number of C M⁻¹ Cᵀ before damping (App. D, eq. D.7): LAPACK's 1-norm "
-        "estimate, or the eigenvalue ratio when damped; NaN for `prioritized`.",
-        unit="1",
-    )
-    objective_damping: float = wire_field("Damping λ on the objective stack (Maciejewski eq. 15).")
-    constraint_damping: float = wire_field(
-        "Damping λ on the Schur complement (Maciejewski eq. 15)."
     )
     constraint_residual: float = wire_field(
         "‖J_sup q̈ + J̇_sup q̇‖ of the returned q̈ (weighted controllers: non-zero only when "
@@ -361,14 +381,12 @@ class Diagnostics(_Strict):
         "Norm of the root wrench the contact forces could not balance.", unit="N, N·m"
     )
     saturated_joints: int = wire_field("Number of DoFs whose torque hit its limit.")
-    priority_levels: list[PriorityLevelReport] | None = wire_field(
-        "Prioritized controller: one report per level, highest priority first "
-        "(level 0 is the equations of motion); absent for the weighted controllers.",
+    weighted: WeightedDiagnostics | None = wire_field(
+        "`momentum` and `tracking`: see the WeightedDiagnostics table; absent otherwise.",
         default=None,
     )
-    inequality_violation: float | None = wire_field(
-        "Prioritized controller: max(0, −(D x + f)) over λ ≥ 0, non-penetration, torque "
-        "and joint limits; absent for the weighted controllers.",
+    prioritized: PrioritizedDiagnostics | None = wire_field(
+        "`prioritized`: see the PrioritizedDiagnostics table; absent otherwise.",
         default=None,
     )
 

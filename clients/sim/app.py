@@ -113,8 +113,9 @@ def run_scenarios(
 
 
 def _print_table(reports: list[dict[str, Any]]) -> None:
+    width = max([24, *(len(r["scenario"]) + 2 for r in reports)])
     print(
-        f"{'scenario':<24}{'backend':<10}{'result':<16}{'CM exc. m':>10}{'COP in':>8}"
+        f"{'scenario':<{width}}{'backend':<10}{'result':<16}{'CM exc. m':>10}{'COP in':>8}"
         f"{'slip mm':>9}{'RTF':>7}"
     )
     for r in reports:
@@ -125,10 +126,10 @@ def _print_table(reports: list[dict[str, Any]]) -> None:
         else:
             result = "stayed up"
         if "com_excursion_m" not in r:  # stopped before its first tick
-            print(f"{r['scenario']:<24}{r['backend']:<10}{result:<16}")
+            print(f"{r['scenario']:<{width}}{r['backend']:<10}{result:<16}")
             continue
         print(
-            f"{r['scenario']:<24}{r['backend']:<10}{result:<16}{r['com_excursion_m']:>10.3f}"
+            f"{r['scenario']:<{width}}{r['backend']:<10}{result:<16}{r['com_excursion_m']:>10.3f}"
             f"{r['cop_strictly_inside_fraction']:>8.0%}{r['foot_slip_m'] * 1e3:>9.1f}"
             f"{r['real_time_factor']:>7.2f}"
         )

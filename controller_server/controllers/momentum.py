@@ -561,7 +561,6 @@ class MomentumController(Controller):
             self._params["ground_height"],
         )
         return {
-            "optimizer_ran": optimizer_ran,
             "position_com_in_world": motion.position_com_in_world,
             "velocity_com_in_world": motion.linear_momentum / self.robot.total_mass,
             "linear_momentum": motion.linear_momentum,
@@ -574,19 +573,22 @@ class MomentumController(Controller):
             "centroidal_moment_pivot": cmp_,
             "supports": list(flags),
             "support_polygon_xy": polygon.reshape(-1),
-            "angular_momentum_weight": self._last_optimizer["angular_momentum_weight"],
             "objective_residuals": (
                 self._last_optimizer["objective_residuals"]
                 if np.array_equal(acceleration, solution.x)  # realized as optimized
                 else {o.name: o.residual(acceleration) for o in objectives}
             ),
-            "objective_condition_number": solution.objective_condition_number,
-            "schur_condition_number": solution.schur_condition_number,
-            "objective_damping": solution.objective_damping,
-            "constraint_damping": solution.constraint_damping,
             "constraint_residual": solution.constraint_residual,
             "root_wrench_residual": dynamics.root_wrench_residual,
             "saturated_joints": dynamics.saturated_joints,
+            "weighted": {
+                "optimizer_ran": optimizer_ran,
+                "angular_momentum_weight": self._last_optimizer["angular_momentum_weight"],
+                "objective_condition_number": solution.objective_condition_number,
+                "schur_condition_number": solution.schur_condition_number,
+                "objective_damping": solution.objective_damping,
+                "constraint_damping": solution.constraint_damping,
+            },
         }
 
 

@@ -540,7 +540,6 @@ class PrioritizedController(Controller):
         support = compute_support_equalities(terms, flags)
         constraint_residual = float(np.linalg.norm(support.C @ acceleration - support.d))
         diagnostics = {
-            "optimizer_ran": True,
             "position_com_in_world": terms.position_com_in_world,
             "velocity_com_in_world": momentum.linear_momentum / terms.total_mass,
             "linear_momentum": momentum.linear_momentum,
@@ -553,12 +552,7 @@ class PrioritizedController(Controller):
             "centroidal_moment_pivot": cmp_,
             "supports": list(flags),
             "support_polygon_xy": layout.support_polygon.reshape(-1),
-            "angular_momentum_weight": math.nan,  # β_ba is eq. 5.17's; here α is fixed
             "objective_residuals": {name: o.residual(x) for name, o in objectives.items()},
-            "objective_condition_number": math.nan,
-            "schur_condition_number": math.nan,
-            "objective_damping": max((level.damping for level in solution.levels), default=0.0),
-            "constraint_damping": 0.0,
             "constraint_residual": constraint_residual,
             "root_wrench_residual": float(
                 np.linalg.norm(
@@ -568,19 +562,21 @@ class PrioritizedController(Controller):
             "saturated_joints": int(
                 np.count_nonzero(np.abs(torque_unclipped) >= robot.torque_limit * (1 - 1e-6))
             ),
-            "priority_levels": [
-                {
-                    "objectives": list(level.names),
-                    "status": level.status,
-                    "residual": level.residual,
-                    "rank": level.rank,
-                    "null_space_dimension": level.null_space_dimension,
-                    "damping": level.damping,
-                    "used_qp": level.used_qp,
-                }
-                for level in solution.levels
-            ],
-            "inequality_violation": solution.inequality_violation,
+            "prioritized": {
+                "priority_levels": [
+                    {
+                        "objectives": list(level.names),
+                        "status": level.status,
+                        "residual": level.residual,
+                        "rank": level.rank,
+                        "null_space_dimension": level.null_space_dimension,
+                        "damping": level.damping,
+                        "used_qp": level.used_qp,
+                    }
+                    for level in solution.levels
+                ],
+                "inequality_violation": solution.inequality_violation,
+            },
         }
         return ControlOutput(
             acceleration=acceleration,

@@ -16,11 +16,12 @@ def test_prioritized_controller_stands_in_both_simulators(server, backend):
     record = run_scenario(scenario, server.endpoint)
     assert not record.fell, record.fall_reason
     last = record.commands[-1].diagnostics
-    levels = last.priority_levels
+    assert last.weighted is None and last.prioritized is not None
+    levels = last.prioritized.priority_levels
     assert levels is not None and levels[0].objectives == ["dynamics"]
     assert all(level.status == "solved" for level in levels)
     assert last.objective_residuals["dynamics"] < 1e-6
-    assert last.inequality_violation < 1e-7
+    assert last.prioritized.inequality_violation < 1e-7
     # Quiet standing: the CM stays over the feet, the feet do not slide.
     start = record.commands[0].diagnostics.position_com_in_world
     assert abs(last.position_com_in_world[1] - start[1]) < 0.01

@@ -183,7 +183,7 @@ def test_tracking_controller_stands(name: str) -> None:
         robot, q, v, output.acceleration, output.joint_torque, output.contact_force_in_world
     )
     assert np.linalg.norm(residual) < 1e-6
-    assert output.diagnostics["schur_condition_number"] >= 1.0
+    assert output.diagnostics["weighted"]["schur_condition_number"] >= 1.0
     np.testing.assert_allclose(
         output.diagnostics["position_com_in_world"],
         pin.centerOfMass(robot.model, robot.model.createData(), q),

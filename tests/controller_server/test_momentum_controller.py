@@ -108,7 +108,7 @@ def test_standing_still_needs_no_correction():
         d["centroidal_moment_pivot"][:2], d["position_com_in_world"][:2], atol=1e-6
     )
     # β_ba = β_0 + γ ‖p − g‖ with p = g: only the floor β_0 remains.
-    assert d["angular_momentum_weight"] == pytest.approx(
+    assert d["weighted"]["angular_momentum_weight"] == pytest.approx(
         controller.parameters()["weight_angular_momentum"], abs=1e-4
     )
     np.testing.assert_allclose(d["angular_momentum_rate_desired"], 0.0, atol=1e-12)
@@ -157,12 +157,14 @@ def test_optimizer_rate_and_rerun_on_support_change():
     q[:3] = robot.standing_position_base_in_world
     v = np.zeros(robot.model.nv)
     ran = [
-        controller.compute(ControlInput(0.001 * k, q, v, (True, True))).diagnostics["optimizer_ran"]
+        controller.compute(ControlInput(0.001 * k, q, v, (True, True))).diagnostics["weighted"][
+            "optimizer_ran"
+        ]
         for k in range(9)
     ]
     assert ran == [True, False, False, False, True, False, False, False, True]
     changed = controller.compute(ControlInput(0.01, q, v, (True, False)))
-    assert changed.diagnostics["optimizer_ran"]
+    assert changed.diagnostics["weighted"]["optimizer_ran"]
 
 
 def test_point_targets_are_added_moved_and_removed_at_run_time():

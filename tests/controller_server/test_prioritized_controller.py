@@ -75,7 +75,7 @@ def check_physics(robot, output):
     """Dynamics residual, λ ≥ 0 / non-penetration, friction pyramid and torque limits."""
     diagnostics = output.diagnostics
     assert diagnostics["objective_residuals"]["dynamics"] < 1e-6
-    assert diagnostics["inequality_violation"] < 1e-7
+    assert diagnostics["prioritized"]["inequality_violation"] < 1e-7
     forces = output.contact_force_in_world
     assert np.all(forces[:, 2] >= -1e-7)
     mus = np.concatenate(
@@ -200,7 +200,7 @@ def test_a_fighting_objective_degrades_only_itself_when_prioritized():
 
 def test_levels_are_reported_every_tick(robot):
     q, v = near_standing_state(robot, 11)
-    levels = compute(robot, q, v).diagnostics["priority_levels"]
+    levels = compute(robot, q, v).diagnostics["prioritized"]["priority_levels"]
     assert levels[0]["objectives"] == ["dynamics"]
     assert levels[-1]["objectives"] == ["forces"]
     assert [level["objectives"] for level in levels[1:-1]] == [
@@ -217,9 +217,8 @@ def test_priorities_and_weights_change_at_run_time():
     controller = create_controller("prioritized", robot)
     controller.set_params({"priority_angular_momentum": 3, "weight_pose": 0.0})
     q, v = near_standing_state(robot, 5)
-    levels = controller.compute(ControlInput(0.0, q, v, (True, True))).diagnostics[
-        "priority_levels"
-    ]
+    output = controller.compute(ControlInput(0.0, q, v, (True, True)))
+    levels = output.diagnostics["prioritized"]["priority_levels"]
     assert {"com_height", "angular_momentum"} in [set(lv["objectives"]) for lv in levels]
     assert not any("pose" in lv["objectives"] for lv in levels)
     for bad in ({"priority_pose": 0}, {"priority_pose": 1.5}, {"weight_com": -1.0}):

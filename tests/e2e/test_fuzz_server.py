@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from clients import ControllerClient
-from protocol import MESSAGE_TYPES, ErrorCode, decode, encode
+from protocol import MESSAGE_TYPES, PROTOCOL_VERSION, ErrorCode, decode, encode
 from protocol.messages import Error, Hello
 from tests.helpers import random_state
 from tests.protocol.samples import sample_messages
@@ -135,7 +135,7 @@ def _mutate(rng: np.random.Generator, welcome, seq: int) -> bytes:
         else:
             payload["unexpected_" + key] = 1
     elif kind == 5:  # set_params with odd values
-        payload = {"type": "set_params", "version": 1, "seq": seq,
+        payload = {"type": "set_params", "version": PROTOCOL_VERSION, "seq": seq,
                    "params": {str(rng.choice(["stiffness", "damping", "optimizer_period_ticks",
                                               "qp_solver", "clip", "support_mask", "warp"])):
                               [np.nan, np.inf, -1.0, 0.0, 1e308, True, "daqp", "/etc/shadow",

@@ -18,7 +18,7 @@ import zmq
 
 from clients import ControllerClient, CurveKeys
 from clients.server_process import ServerProcess
-from protocol import ErrorCode, decode, encode
+from protocol import PROTOCOL_VERSION, ErrorCode, decode, encode
 from protocol.messages import Command, Error, Hello, SetParams, State, Stats, Welcome
 from tests.helpers import random_state
 
@@ -174,7 +174,7 @@ def _check_caps(endpoint):
         assert big.code == ErrorCode.LIMIT_EXCEEDED and "--max-message-bytes" in big.detail
     finally:
         for peer in peers:
-            peer.ask(msgpack.packb({"type": "bye", "version": 1, "seq": 9}))
+            peer.ask(msgpack.packb({"type": "bye", "version": PROTOCOL_VERSION, "seq": 9}))
             peer.close()
     with Peer(endpoint) as peer:
         padded = "<mujoco>" + " " * 60_000 + "</mujoco>"
@@ -218,7 +218,7 @@ def test_a_flooding_session_is_refused_beyond_its_in_flight_cap(tight_server):
         assert refused and all(
             r.code in (ErrorCode.LIMIT_EXCEEDED, ErrorCode.DEADLINE_EXCEEDED) for r in refused
         )
-        flood.ask(msgpack.packb({"type": "bye", "version": 1, "seq": 99}))
+        flood.ask(msgpack.packb({"type": "bye", "version": PROTOCOL_VERSION, "seq": 99}))
 
 
 def test_memory_of_500_expired_sessions_is_returned():
@@ -352,7 +352,7 @@ def test_first_request_is_answered_at_once_after_the_ready_line():
 @pytest.mark.parametrize("seq", [True, 1.0, "1", -1, 2**63])
 def test_seq_must_be_an_integer(tight_server, seq):
     with Peer(tight_server.endpoint) as peer:
-        reply = peer.ask(msgpack.packb({"type": "stats", "version": 1, "seq": seq}))
+        reply = peer.ask(msgpack.packb({"type": "stats", "version": PROTOCOL_VERSION, "seq": seq}))
         assert reply.code == ErrorCode.INVALID_FIELD and reply.field == "seq"
         assert reply.seq == -1
 
@@ -384,4 +384,4 @@ def test_a_refused_hello_in_flight_with_a_good_one_leaves_the_good_session(tight
         assert isinstance(reply, Command), reply
         sessions = {s.session_id: s for s in peer.ask(Stats(seq=4)).sessions}
         assert sessions[replies[1].session_id].ticks == 1
-        peer.ask(msgpack.packb({"type": "bye", "version": 1, "seq": 5}))
+        peer.ask(msgpack.packb({"type": "bye", "version": PROTOCOL_VERSION, "seq": 5}))

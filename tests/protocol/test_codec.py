@@ -35,7 +35,7 @@ def test_sample_covers_every_type():
 
 
 def test_golden_bytes_of_bye():
-    expected = b"\x83\xa4type\xa3bye\xa7version\x01\xa3seq\x07"
+    expected = b"\x83\xa4type\xa3bye\xa7version\x02\xa3seq\x07"
     assert encode(Bye(seq=7)) == expected
     assert decode(expected) == Bye(seq=7)
 
@@ -61,7 +61,8 @@ def _state_payload(**changes):
         (b"\xc1garbage", ErrorCode.MALFORMED, ""),
         (msgpack.packb([1, 2, 3]), ErrorCode.MALFORMED, ""),
         (encode(Bye(seq=1))[:-3], ErrorCode.MALFORMED, ""),
-        (_state_payload(version=2), ErrorCode.UNSUPPORTED_VERSION, "version"),
+        (_state_payload(version=PROTOCOL_VERSION + 1), ErrorCode.UNSUPPORTED_VERSION, "version"),
+        (_state_payload(version=PROTOCOL_VERSION - 1), ErrorCode.UNSUPPORTED_VERSION, "version"),
         (_state_payload(version=True), ErrorCode.UNSUPPORTED_VERSION, "version"),
         (_state_payload(type="teleport"), ErrorCode.UNKNOWN_TYPE, "type"),
         (_state_payload(time_s="now"), ErrorCode.INVALID_FIELD, "time_s"),

@@ -55,8 +55,11 @@ def test_round_trip_gives_back_the_recorded_messages(tmp_path):
 
 def test_non_finite_numbers_are_written_as_null_and_read_back_as_nan(tmp_path):
     command = next(m for m in sample_messages() if isinstance(m, Command))
+    weighted = command.diagnostics.weighted.model_copy(
+        update={"objective_condition_number": math.inf}
+    )
     diagnostics = command.diagnostics.model_copy(
-        update={"objective_condition_number": math.inf, "objective_residuals": {"a": math.nan}}
+        update={"weighted": weighted, "objective_residuals": {"a": math.nan}}
     )
     command = command.model_copy(
         update={"joint_torque": np.array([np.inf, -1.0]), "diagnostics": diagnostics}
@@ -66,11 +69,11 @@ def test_non_finite_numbers_are_written_as_null_and_read_back_as_nan(tmp_path):
     with open(tmp_path / "log.mcap", "rb") as file:
         data = json.loads(next(make_reader(file).iter_messages())[2].data)
     assert data["joint_torque"] == [None, -1.0]
-    assert data["diagnostics"]["objective_condition_number"] is None
+    assert data["diagnostics"]["weighted"]["objective_condition_number"] is None
     assert data["diagnostics"]["objective_residuals"] == {"a": None}
     (entry,) = read_log(tmp_path / "log.mcap")
     np.testing.assert_array_equal(entry.message.joint_torque, [np.nan, -1.0])
-    assert math.isnan(entry.message.diagnostics.objective_condition_number)
+    assert math.isnan(entry.message.diagnostics.weighted.objective_condition_number)
     assert math.isnan(entry.message.diagnostics.objective_residuals["a"])
 
 
