@@ -104,10 +104,10 @@ def test_serve_defaults_are_the_config_defaults():
     """`poise serve`'s option defaults and ServeConfig's are one set of numbers."""
     import dataclasses
 
-    from controller_server.cli import _serve_config
+    from controller_server.cli.serve import serve_config
     from controller_server.config import ServeConfig
 
-    parsed = _serve_config(build_parser().parse_args(["serve"]))
+    parsed = serve_config(build_parser().parse_args(["serve"]))
     expected = ServeConfig(workers=parsed.workers, log_level=parsed.log_level)
     assert dataclasses.asdict(parsed) == dataclasses.asdict(expected)
 

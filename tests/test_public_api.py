@@ -15,7 +15,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("protocol", "controller_server", "clients")
-SCRIPTS = {"controller_server.__main__", "controller_server.worker"}
+SCRIPTS = {"controller_server.cli.__main__", "controller_server.worker"}
 """Entry points run with ``python -m``: their surface is their command line."""
 
 
@@ -31,10 +31,12 @@ MODULES = sorted(
 
 @pytest.mark.parametrize("name", MODULES)
 def test_every_module_documents_and_exports_its_surface(name):
+    if name in SCRIPTS:  # importing runs it: read its docstring only
+        path = ROOT / Path(*name.split(".")).with_suffix(".py")
+        assert ast.get_docstring(ast.parse(path.read_text())), f"{name} has no docstring"
+        return
     module = importlib.import_module(name)
     assert inspect.getdoc(module), f"{name} has no docstring"
-    if name in SCRIPTS:
-        return
     exported = getattr(module, "__all__", None)
     assert exported is not None, f"{name} has no __all__"
     for public in exported:

@@ -1,0 +1,78 @@
+"""The ``poise`` command line: ``poise serve``, ``poise sim``, ``poise demo``, ``poise list``, ….
+
+One module per group of subcommands (``serve``, ``runs``, ``logs``,
+``listing``), each adding its parsers; a handler takes the parsed
+arguments. A mistake the user can fix (a scenario, an endpoint, no server
+answering) is one line on stderr and exit code 2;
+``poise --debug`` shows its traceback instead. The module imports nothing
+heavy, so that :func:`main` sets single-threaded BLAS before numpy loads.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+from collections.abc import Sequence
+
+from controller_server.blas import default_to_single_threaded_blas
+from controller_server.cli import listing, logs, runs, serve
+from controller_server.cli.common import CONTROLLER_NAMES, UsageError, as_usage_error
+
+__all__ = ["CONTROLLER_NAMES", "UsageError", "build_parser", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``poise`` (also used to document the CLI)."""
+    parser = argparse.ArgumentParser(
+        prog="poise",
+        description="Poise: whole-body balance control for bipeds, served over ZeroMQ.",
+    )
+    parser.add_argument(
+        "--log-level",
+        default="INFO",
+        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        help="logging verbosity (default: INFO)",
+    )
+    parser.add_argument(
+        "--debug",
+        action="store_true",
+        help="show the traceback of an error instead of its one-line message",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for group in (serve, runs, logs, listing):
+        group.add_parsers(commands)
+    return parser
+
+
+def _interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``poise`` console script.
+
+    Sets single-threaded BLAS (unless the environment says otherwise) before
+    anything imports numpy; turns a user's mistake into one line on stderr
+    and exit code 2 (``--debug``: the traceback). SIGTERM stops a command as
+    Ctrl-C does (``poise serve`` installs its own handlers): what ran is kept
+    (a partial report), exit code 130.
+    """
+    default_to_single_threaded_blas()
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=args.log_level, format="%(asctime)s %(name)s %(levelname)s %(message)s"
+    )
+    signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        return int(args.handler(args))
+    except KeyboardInterrupt:
+        print(f"poise {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        mistake = as_usage_error(exc)
+        if mistake is None or args.debug:
+            raise
+        print(f"poise {args.command}: {mistake}", file=sys.stderr)
+        return 2

@@ -1,0 +1,105 @@
+"""What the ``poise`` subcommands share: constants, the one-line error, client options."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from clients.client import CurveKeys
+
+__all__ = [
+    "CONTROLLER_NAMES",
+    "DEFAULT_ENDPOINT",
+    "READY_PREFIX",
+    "UsageError",
+    "add_client_key_options",
+    "add_run_output_options",
+    "as_usage_error",
+    "check_endpoint_option",
+    "curve_keys",
+]
+
+DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+READY_PREFIX = "poise serve: listening on "
+"""First line ``poise serve`` prints, once its workers are warm and it answers at once."""
+CONTROLLER_NAMES = ["momentum", "prioritized", "tracking"]
+"""Controllers a client may pick: the keys of `controller_server.controllers.CONTROLLERS`,
+listed here so that the CLI starts without importing them (a test keeps the two equal)."""
+
+
+class UsageError(Exception):
+    """A user's mistake on the command line: printed as one line, exit code 2."""
+
+
+def as_usage_error(exc: Exception) -> UsageError | None:
+    """The one-line error for a mistake the user can fix; ``None`` for anything else (a bug).
+
+    Imports the error types only once something failed, so that a command
+    loads only what it uses.
+    """
+    if isinstance(exc, UsageError):
+        return exc
+    from clients.client import ServerTimeout
+    from clients.sim.errors import ScenarioError
+    from clients.sim.output import OutputBusy
+    from protocol.endpoints import InvalidEndpoint
+
+    if isinstance(exc, ScenarioError | InvalidEndpoint | ServerTimeout | OutputBusy):
+        return UsageError(str(exc))
+    return None
+
+
+def check_endpoint_option(option: str, endpoints: Sequence[str] | str | None) -> None:
+    """Refuse an endpoint ZeroMQ cannot use (``localhost:5555``) before anything starts."""
+    from protocol.endpoints import InvalidEndpoint, check_endpoint
+
+    for endpoint in [endpoints] if isinstance(endpoints, str) else endpoints or []:
+        try:
+            check_endpoint(endpoint)
+        except InvalidEndpoint as exc:
+            raise UsageError(f"{option} {exc}") from exc
+
+
+def curve_keys(args: argparse.Namespace) -> CurveKeys | None:
+    """The client's CURVE keys from ``--server-key``/``--client-key``, if given."""
+    from clients.client import CurveKeys
+
+    if args.server_key is None:
+        if args.client_key is not None:
+            raise UsageError("--client-key needs --server-key (the server's public key file)")
+        return None
+    try:
+        return CurveKeys.from_files(args.server_key, args.client_key)
+    except ValueError as exc:  # InvalidKeyFile: one line naming the file
+        raise UsageError(str(exc)) from None
+
+
+def add_client_key_options(parser: argparse.ArgumentParser) -> None:
+    """``--server-key`` and ``--client-key``: CURVE for a client of a ``--connect``ed server."""
+    parser.add_argument(
+        "--server-key",
+        metavar="FILE",
+        help="with --connect to a CURVE server: its public key file (NAME.key of `poise keygen`)",
+    )
+    parser.add_argument(
+        "--client-key",
+        metavar="FILE",
+        help="this client's secret key file (NAME.key_secret); default: a throwaway key pair",
+    )
+
+
+def add_run_output_options(parser: argparse.ArgumentParser) -> None:
+    """``--record`` and ``--series``: what a simulator run writes besides its report."""
+    parser.add_argument(
+        "--record",
+        metavar="DIR",
+        help="record each scenario's conversation with the server to DIR/<scenario>.mcap",
+    )
+    parser.add_argument(
+        "--series",
+        action="store_true",
+        help="also write each scenario's raw time series (states, commands, diagnostics) "
+        "to <output>/<scenario>.npz",
+    )

@@ -1,0 +1,81 @@
+"""``poise list``: scenarios, models, controllers, a model's joints or bodies, one per line."""
+
+from __future__ import annotations
+
+import argparse
+
+from controller_server.cli.common import CONTROLLER_NAMES, UsageError
+
+__all__ = ["LIST_WHAT", "add_parsers"]
+
+LIST_WHAT = ["scenarios", "models", "controllers", "joints", "bodies"]
+"""What ``poise list`` lists; ``joints`` and ``bodies`` of one model."""
+
+
+def _list(args: argparse.Namespace) -> int:
+    """Print one line per item: scenarios, models, controllers, or a model's joints or bodies."""
+    if args.what in ("joints", "bodies") and args.model is None:
+        raise UsageError(f"name the model: poise list {args.what} MODEL (poise list models)")
+    if args.what not in ("joints", "bodies") and args.model is not None:
+        raise UsageError(f"poise list {args.what} takes no MODEL")
+    for line in _list_lines(args.what, args.model):
+        print(line)
+    return 0
+
+
+def _list_lines(what: str, model: str | None) -> list[str]:
+    if what == "scenarios":
+        from clients.sim.scenario import builtin_scenario_names, load_scenario
+
+        lines = []
+        for name in builtin_scenario_names():
+            description = " ".join(load_scenario(name).description.split())
+            if len(description) > 80:
+                description = description[:79] + "…"
+            lines.append(f"{name:<26}{description}".rstrip())
+        return lines
+    if what == "models":
+        from clients.sim.model_file import builtin_model_names
+
+        return builtin_model_names()
+    if what == "controllers":
+        return [f"{name}{'  (default)' if name == 'momentum' else ''}" for name in CONTROLLER_NAMES]
+    from clients.sim.model_file import body_names, resolve_model_path
+
+    try:
+        path = resolve_model_path(str(model))
+    except FileNotFoundError as exc:
+        raise UsageError(str(exc)) from exc
+    if what == "bodies":
+        return body_names(path)
+    from controller_server.errors import ModelError
+    from controller_server.models import load_robot_model
+
+    try:
+        robot = load_robot_model(
+            model_text=path.read_text(),
+            model_format="urdf" if path.suffix.lower() == ".urdf" else "mjcf",
+        )
+    except ModelError as exc:
+        raise UsageError(f"{model}: {exc}") from exc
+    # One line per joint in wire order, with what initial_joint_position takes for it.
+    return [
+        f"{joint.name:<26}{joint.kind:<11}"
+        + ("4 numbers, a quaternion [x, y, z, w]" if joint.kind == "ball" else f"{joint.nq} number")
+        for joint in robot.joints
+    ]
+
+
+def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``list``."""
+    listing = commands.add_parser(
+        "list",
+        help="list built-in scenarios, models, controllers, or a model's joints or bodies",
+        description="Print one line per item: the built-in scenarios (with their description), "
+        "models and controllers; the joints of MODEL in wire order (with the numbers "
+        "initial_joint_position takes for each), or the bodies of MODEL (what a push may name). "
+        "MODEL is a built-in name or an .xml/.urdf file.",
+    )
+    listing.add_argument("what", choices=LIST_WHAT, metavar="{" + ",".join(LIST_WHAT) + "}")
+    listing.add_argument("model", nargs="?", metavar="MODEL", help="for joints and bodies")
+    listing.set_defaults(handler=_list)

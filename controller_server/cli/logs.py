@@ -1,0 +1,146 @@
+"""``poise replay`` and ``poise log info|plot``: recorded conversations."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from controller_server.cli.common import UsageError, add_client_key_options, curve_keys
+
+__all__ = ["add_parsers"]
+
+
+def _replay(args: argparse.Namespace) -> int:
+    import json
+
+    from clients.progress import ProgressBar
+    from clients.replay import ReplayError, replay_log
+    from clients.sim.app import server_endpoint
+    from protocol.recording import BadLog
+
+    params = {}
+    for assignment in args.set or []:
+        name, _, value = assignment.partition("=")
+        if not name or not _:
+            raise UsageError(f"--set {assignment!r}: write NAME=VALUE (VALUE in JSON)")
+        try:
+            params[name] = json.loads(value)
+        except json.JSONDecodeError:
+            params[name] = value  # a bare word: a text parameter
+    try:
+        with server_endpoint(args.connect) as endpoint, ProgressBar(Path(args.log).name) as bar:
+            report = replay_log(
+                args.log,
+                endpoint,
+                atol=args.atol,
+                rtol=args.rtol,
+                params=params,
+                curve=curve_keys(args),
+                realtime=args.realtime,
+                progress=bar,
+            )
+    except (BadLog, ReplayError) as exc:
+        raise UsageError(str(exc)) from None
+    if report.log_truncated:
+        print(
+            f"warning: the log ends early (its recorder was killed?): replayed the "
+            f"{report.messages_read} messages before the cut"
+        )
+    print(
+        f"sent {report.requests_sent} requests, compared {report.compared} commands; "
+        f"max abs error {report.max_abs_error:.3g}, "
+        f"max rel error {report.max_rel_error:.3g} (atol {args.atol:g}, rtol {args.rtol:g})"
+    )
+    if report.regression:
+        print(
+            f"REGRESSION: {report.divergent_commands} commands out of tolerance; first at seq "
+            f"{report.first_divergent_seq}: {', '.join(report.divergent_fields)}"
+        )
+    else:
+        print("replay matches the recording")
+    if args.json:
+        Path(args.json).write_text(json.dumps(report.to_json(), indent=2))
+    return 1 if report.regression else 0
+
+
+def _log_info(args: argparse.Namespace) -> int:
+    from clients.log_info import format_summary, summarize_log
+    from protocol.recording import BadLog
+
+    try:
+        print(format_summary(args.log, summarize_log(args.log)))
+    except BadLog as exc:
+        raise UsageError(str(exc)) from None
+    return 0
+
+
+def _log_plot(args: argparse.Namespace) -> int:
+    from clients.log_info import plot_log
+    from clients.replay import ReplayError
+    from protocol.recording import BadLog
+
+    for log_path in args.log:
+        try:
+            print(f"{log_path}: {plot_log(log_path, args.output)}")
+        except (BadLog, ReplayError) as exc:
+            raise UsageError(str(exc)) from None
+    return 0
+
+
+def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``replay`` and ``log``."""
+    replay = commands.add_parser(
+        "replay",
+        help="replay a recorded log against a server and compare every command",
+        description="Re-create the log's session from its recorded hello, send its states and "
+        "set_params in order, compare each command with the recorded one (|new - old| <= "
+        "atol + rtol |old| per entry). Exit code 1 on a regression, 2 on a log that cannot be "
+        "replayed.",
+    )
+    replay.add_argument("log", metavar="LOG", help="MCAP log (`poise sim --record DIR`)")
+    replay.add_argument(
+        "--connect", default=None, metavar="ENDPOINT", help="use a running server at ENDPOINT"
+    )
+    replay.add_argument("--atol", type=float, default=1e-9, help="absolute tolerance (1e-9)")
+    replay.add_argument("--rtol", type=float, default=1e-9, help="relative tolerance (1e-9)")
+    replay.add_argument(
+        "--set",
+        action="append",
+        metavar="NAME=VALUE",
+        help="override a parameter of the recorded hello (VALUE in JSON); repeatable",
+    )
+    replay.add_argument(
+        "--realtime",
+        action="store_true",
+        help="send each state at its recorded time (default: as fast as the server answers)",
+    )
+    replay.add_argument("--json", metavar="REPORT", help="also write the report as JSON")
+    add_client_key_options(replay)
+    replay.set_defaults(handler=_replay)
+
+    log_command = commands.add_parser(
+        "log", help="inspect a recorded log", description="Inspect a recorded MCAP log."
+    )
+    log_commands = log_command.add_subparsers(dest="log_command", required=True, metavar="WHAT")
+    info = log_commands.add_parser(
+        "info",
+        help="sessions, model, controller, parameters, duration, message counts and rates",
+        description="Summarize a recorded log: sessions (model, hash, controller, parameters), "
+        "duration, messages per type and direction, states per second.",
+    )
+    info.add_argument("log", metavar="LOG")
+    info.set_defaults(handler=_log_info)
+    plot = log_commands.add_parser(
+        "plot",
+        help="the simulator's PNG plot of a log's first session",
+        description="Plot the first session of each log as `poise sim` plots a run (ground "
+        "reference points, CM height, momenta, joint torques) to DIR/<log name>.png.",
+    )
+    plot.add_argument("log", metavar="LOG", nargs="+")
+    plot.add_argument(
+        "--output",
+        default="out/logs",
+        metavar="DIR",
+        help="directory for the plots (default: out/logs)",
+    )
+    plot.set_defaults(handler=_log_plot)

@@ -1,0 +1,182 @@
+"""``poise sim`` and ``poise demo``: simulator runs as clients of a server."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from controller_server.cli.common import (
+    CONTROLLER_NAMES,
+    add_client_key_options,
+    add_run_output_options,
+    check_endpoint_option,
+    curve_keys,
+)
+
+__all__ = ["add_parsers"]
+
+
+def _sim(args: argparse.Namespace) -> int:
+    from clients.sim.app import SWEEP_DIRECTIONS, run_scenarios, server_endpoint, sweep_controllers
+    from clients.sim.scenario import PushSpec
+
+    overrides = {}
+    if args.backend:
+        overrides["backend"] = args.backend
+    if args.controller:
+        overrides["controller"] = args.controller
+    check_endpoint_option("--connect", args.connect)
+    curve = curve_keys(args)
+    if not args.sweep_push:
+        record_dir = Path(args.record) if args.record else None
+        reports = run_scenarios(
+            args.scenarios,
+            Path(args.output),
+            args.connect,
+            overrides,
+            curve=curve,
+            record_dir=record_dir,
+            series=args.series,
+        )
+        return 1 if any(report["fell"] or not report["complete"] for report in reports) else 0
+    push = PushSpec(
+        body=args.push_body,
+        force_in_world_N=(1.0, 0.0, 0.0),
+        start_s=args.push_start,
+        duration_s=args.push_duration,
+    )
+    directions = SWEEP_DIRECTIONS
+    if args.push_direction:
+        directions = {f"({x:g}, {y:g}, {z:g})": (x, y, z) for x, y, z in args.push_direction}
+    with server_endpoint(args.connect) as endpoint:
+        sweep_controllers(args.scenarios[0], push, directions, endpoint, overrides, curve=curve)
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from clients.demo import run_demo
+
+    check_endpoint_option("--connect", args.connect)
+    return run_demo(
+        Path(args.output),
+        args.connect,
+        args.backend,
+        args.controller,
+        curve=curve_keys(args),
+        record_dir=Path(args.record) if args.record else None,
+        series=args.series,
+    )
+
+
+def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``sim`` and ``demo``."""
+    sim = commands.add_parser(
+        "sim",
+        help="run scenarios in the simulator client against a server",
+        description="Run scenarios (built-in names, see `poise list scenarios`, or TOML files) "
+        "with a physics backend as a client of `poise serve` (started on a free loopback port "
+        "unless --connect); write DIR/report.json and DIR/<scenario>.png, print a summary. "
+        "Exit code 1 if the robot fell in any scenario.",
+    )
+    sim.add_argument(
+        "scenarios",
+        nargs="*",
+        default=["push_sequence"],
+        help="scenario names or .toml paths (default: push_sequence)",
+    )
+    sim.add_argument(
+        "--backend",
+        choices=["reference", "mujoco"],
+        help="physics backend for every scenario (default: each scenario's own)",
+    )
+    sim.add_argument(
+        "--controller",
+        choices=CONTROLLER_NAMES,
+        help="controller for every scenario (default: each scenario's own)",
+    )
+    sim.add_argument(
+        "--output",
+        default="out/sim",
+        metavar="DIR",
+        help="directory for report.json and the plots (default: out/sim)",
+    )
+    sim.add_argument(
+        "--connect",
+        default=None,
+        metavar="ENDPOINT",
+        help="use a running server at ENDPOINT (tcp://HOST:PORT) instead of starting one",
+    )
+    sim.add_argument(
+        "--sweep-push",
+        action="store_true",
+        help="find by bisection the largest push each thesis ablation and the prioritized "
+        "controller survive, per direction (first scenario)",
+    )
+    sim.add_argument(
+        "--push-body",
+        default="chest",
+        metavar="BODY",
+        help="body pushed in the sweep (default: chest; see `poise list bodies MODEL`)",
+    )
+    sim.add_argument(
+        "--push-direction",
+        type=float,
+        nargs=3,
+        action="append",
+        metavar=("X", "Y", "Z"),
+        help="push direction in world (normalised); repeat for several (default: from behind "
+        "+x, from the front -x, from the side +y)",
+    )
+    sim.add_argument(
+        "--push-start",
+        type=float,
+        default=0.5,
+        metavar="SECONDS",
+        help="when the swept push starts, in simulated time (default: 0.5)",
+    )
+    sim.add_argument(
+        "--push-duration",
+        type=float,
+        default=0.1,
+        metavar="SECONDS",
+        help="how long the swept push lasts (default: 0.1)",
+    )
+    add_client_key_options(sim)
+    add_run_output_options(sim)
+    sim.set_defaults(handler=_sim)
+
+    demo = commands.add_parser(
+        "demo",
+        help="the thesis humanoid balancing under pushes in the simulator, with plots",
+        description="Start `poise serve` on a free loopback port (or use --connect), run the "
+        "thesis' push scenarios (push_sequence, head_push) in the simulator (--backend) as its "
+        "client, write DIR/report.json and DIR/<scenario>.png, print a summary. Exit code 1 if "
+        "the robot fell.",
+    )
+    demo.add_argument(
+        "--backend",
+        default="reference",
+        choices=["reference", "mujoco"],
+        help="physics backend (default: reference)",
+    )
+    demo.add_argument(
+        "--controller",
+        default="momentum",
+        choices=CONTROLLER_NAMES,
+        help="controller to run (default: momentum)",
+    )
+    demo.add_argument(
+        "--output",
+        default="out",
+        metavar="DIR",
+        help="directory for report.json and the plots (default: out)",
+    )
+    demo.add_argument(
+        "--connect",
+        default=None,
+        metavar="ENDPOINT",
+        help="use a running server at ENDPOINT instead of starting one",
+    )
+    add_client_key_options(demo)
+    add_run_output_options(demo)
+    demo.set_defaults(handler=_demo)
