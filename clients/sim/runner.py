@@ -8,11 +8,14 @@ steps while the server computes (client and server run in parallel, one
 control period apart, as on hardware); the state sent at tick k is then the
 one predicted for tick k + 1 (:meth:`RobotState.predicted`), so each command
 is computed for the state it will act on. The scenario's parameter changes go
-out as ``set_params`` at their tick. Every state carries the backend's
+out as ``set_params`` at their tick. Each state carries the backend's
 contact wrenches (the thesis' penalty forces): the momentum controller reads
 its instability indicator ``‖p − g‖`` (eq. 5.17) from them in either
 ground-force mode, and in ``measured`` mode its inverse dynamics uses them
-too. The run stops early once the robot has fallen.
+too. A predicted state (``command_delay_ticks = 1``) carries them only in
+``measured`` mode: they were measured a tick before it, and with them the
+MuJoCo ``push_sequence`` fell in that configuration. The run stops early
+once the robot has fallen.
 """
 
 from __future__ import annotations
@@ -242,6 +245,8 @@ def run_scenario(
                 flags = support_flags(
                     flags, touching, wrenches[:, 2], scenario.support_force_threshold_N
                 )
+                if scenario.command_delay_ticks and not measured:
+                    wrenches = None
                 sent, sent_time_s = state, backend.time_s
                 if held_command is not None and model is not None:
                     # This tick's command acts from the next tick on: send the state it will
