@@ -8,9 +8,14 @@ steps while the server computes (client and server run in parallel, one
 control period apart, as on hardware); the state sent at tick k is then the
 one predicted for tick k + 1 (:meth:`RobotState.predicted`), so each command
 is computed for the state it will act on. The scenario's parameter changes go
-out as ``set_params`` at their tick. In ``measured`` ground-force mode it
-also sends the backend's contact wrenches (the thesis' penalty forces). The
-run stops early once the robot has fallen.
+out as ``set_params`` at their tick. Each state carries the backend's
+contact wrenches (the thesis' penalty forces): the momentum controller reads
+its instability indicator ``‖p − g‖`` (eq. 5.17) from them in either
+ground-force mode, and in ``measured`` mode its inverse dynamics uses them
+too. A predicted state (``command_delay_ticks = 1``) carries them only in
+``measured`` mode: they were measured a tick before it, and with them the
+MuJoCo ``push_sequence`` fell in that configuration. The run stops early
+once the robot has fallen.
 """
 
 from __future__ import annotations
@@ -235,16 +240,13 @@ def run_scenario(
                 while changes and changes[0].time_s <= backend.time_s + 1e-9:
                     client.set_params(changes.pop(0).params)
                 touching = backend.contact_flags()
-                # The wrenches cost MuJoCo a contact-force call per contact: read them only
-                # when they are sent or decide whether a touching foot becomes a support.
-                wrenches = None
-                if measured or any(t and not f for t, f in zip(touching, flags, strict=True)):
-                    wrenches = backend.contact_wrenches_in_world()
-                normal_force_N = np.zeros(len(touching)) if wrenches is None else wrenches[:, 2]
+                # Read every tick: MuJoCo makes a contact-force call per contact (40 µs for 8).
+                wrenches = backend.contact_wrenches_in_world()
                 flags = support_flags(
-                    flags, touching, normal_force_N, scenario.support_force_threshold_N
+                    flags, touching, wrenches[:, 2], scenario.support_force_threshold_N
                 )
-                wrenches = wrenches if measured else None
+                if scenario.command_delay_ticks and not measured:
+                    wrenches = None
                 sent, sent_time_s = state, backend.time_s
                 if held_command is not None and model is not None:
                     # This tick's command acts from the next tick on: send the state it will

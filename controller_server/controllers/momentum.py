@@ -8,7 +8,10 @@ Per optimizer tick, over ``x = q̈`` (eq. 5.1)::
 * ``C_t`` tracking toward a fixed pose or a motion clip (eq. 5.3–5.4), with
   per-joint weights and gains raised by soft joint limits (eq. 6.5–6.6);
 * ``C_bl`` linear momentum toward ``c_des`` over the supports (eq. 5.9–5.10);
-* ``C_ba`` angular momentum held (eq. 5.15–5.16), weight ``γ ‖p − g‖`` (eq. 5.17);
+* ``C_ba`` angular momentum damped (eq. 5.15–5.16), weight ``β_0 + γ ‖p − g‖`` (eq. 5.17),
+  with the COP ``p`` and CMP ``g`` of the state's measured ground wrenches
+  when the client sends them (in either ``ground_force_mode``), else of the
+  previous tick's commanded wrenches (none on the first tick: ``β_0``);
 * ``C_p`` soft point-acceleration targets (eq. 6.1–6.3), added at run time;
 
 solved by the closed-form KKT of App. D with damped least squares
@@ -160,7 +163,11 @@ class MomentumController(Controller):
             doc="L̇_des is limited so its COP stays this far inside the support polygon (m)",
         ),
         "angular_momentum_gain": ParamSpec(
-            10.0, minimum=0.0, maximum=1e6, doc="γ of eq. 5.17 (1/m)"
+            3000.0,
+            minimum=0.0,
+            maximum=1e6,
+            doc="γ of eq. 5.17 (1/m); p, g of the measured wrenches if sent, else of the last"
+            " command's",
         ),
         "angular_momentum_damping": ParamSpec(
             10.0,
@@ -169,7 +176,7 @@ class MomentumController(Controller):
             doc="k_H: Ḣ_des = −k_H H instead of eq. 5.15's Ḣ_des = 0 (1/s)",
         ),
         "weight_angular_momentum": ParamSpec(
-            10.0, minimum=0.0, maximum=1e6, doc="β_0 added to eq. 5.17's β_ba = γ ‖p − g‖ (1)"
+            0.0, minimum=0.0, maximum=1e6, doc="β_0 added to eq. 5.17's β_ba = γ ‖p − g‖ (1)"
         ),
         "ground_force_mode": ParamSpec(
             "distributed",
@@ -381,9 +388,12 @@ class MomentumController(Controller):
             points, origins = terms.position_points_in_world, terms.position_contact_frames_in_world
             if run_optimizer:
                 polygon = _support_polygon(points, flags)
-                wrenches = (
-                    control_input.contact_wrench_in_world if measured else self._last_wrenches
-                )
+                # β_ba's p and g (eq. 5.17) come from the body's measured ground wrench
+                # whenever one is sent, whatever the inverse dynamics uses; without one,
+                # from the previous command's wrench (the controller's own plan).
+                wrenches = control_input.contact_wrench_in_world
+                if wrenches is None:
+                    wrenches = self._last_wrenches
                 self._optimize(control_input, terms, wrenches, flags, polygon)
             assert self._last_solution is not None
             dynamics = solve_inverse_dynamics(

@@ -11,13 +11,15 @@ moment pivot (eq. 3.9–3.10): the farther apart they are, the more the ground
 is changing the angular momentum, and the harder the objective holds it.
 Rows are divided by ``m_T`` like the linear objective's.
 
-Extension (off in these functions' defaults, on in ``MomentumController``'s:
-``k_H = 10``, ``β_0 = 10``): ``Ḣ_des = −k_H H`` damps the
-angular momentum instead of holding it, and a floor ``β_0`` on the weight
-keeps the objective alive when the COP and CMP coincide (``β_ba = β_0 +
-γ ‖p − g‖``). A push above the CM leaves the body pitching; holding that
-angular momentum (eq. 5.15) keeps it pitching, damping it brings it to rest
-(the centroidal momentum control of Lee & Goswami 2012).
+Extensions (off in these functions' defaults): ``Ḣ_des = −k_H H`` damps the
+angular momentum instead of holding it (``k_H = 10`` in ``MomentumController``),
+and an optional floor ``β_0`` on the weight keeps the objective alive when the
+COP and CMP coincide (``β_ba = β_0 + γ ‖p − g‖``; ``β_0 = 0`` by default, so
+the weight is the thesis' instability indicator alone, ``γ = 3000`` /m: about
+340 at the 0.11 m of a 220 N head push, about 0 at rest). A push above the
+CM leaves the body pitching; holding that angular momentum (eq. 5.15) keeps
+it pitching, damping it brings it to rest (the centroidal momentum control of
+Lee & Goswami 2012).
 """
 
 from __future__ import annotations

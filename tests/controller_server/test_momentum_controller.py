@@ -302,3 +302,56 @@ def test_support_mask_and_friction_coefficients_shape_the_contact_forces():
     assert np.all(np.hypot(right[:, 0], right[:, 1]) <= 0.05 * right[:, 2] + 1e-9)
     with pytest.raises(InvalidParams):
         controller.set_params({"support_mask": [1.0, 1.0, 1.0]})
+
+
+def test_angular_weight_follows_the_measured_cop_cmp_distance():
+    """β_ba = β_0 + γ ‖p − g‖ (eq. 5.17) with p and g of the measured wrenches, also when
+    inverse dynamics distributes its own forces; without a measured wrench, of the previous
+    command's (none on the first tick: β_0 alone).
+
+    The measured wrench is the body's weight, vertical, split over both feet with a pitch
+    torque that puts the COP ``d`` ahead of the CM: the CMP of a vertical force is the CM's
+    ground projection, so ``‖p − g‖ = d`` exactly, whatever the feet's geometry.
+    """
+    robot = load_robot_model("thesis_humanoid")
+    q = pin.neutral(robot.model)
+    q[:3] = robot.standing_position_base_in_world
+    v = np.zeros(robot.model.nv)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    com = pin.centerOfMass(robot.model, data, q)
+    support_center = np.mean([data.oMf[c.frame_id].translation for c in robot.contacts], axis=0)
+    weight_N, d = robot.total_mass * 9.81, 0.04
+    # p_x = c_sp,x − τ_y / f_z (eq. 3.3 with f_x = 0) = c_x + d; the feet's forces are
+    # equal, so their moments about c_sp cancel and τ is the sum of the feet's torques.
+    torque_y = -(com[0] + d - support_center[0]) * weight_N
+    wrenches = np.zeros((len(robot.contacts), 6))
+    wrenches[:, 2] = weight_N / len(robot.contacts)
+    wrenches[:, 4] = torque_y / len(robot.contacts)
+    flags = (True,) * len(robot.contacts)
+    controller = MomentumController(robot, {"weight_angular_momentum": 2.0})
+    assert controller.parameters()["angular_momentum_gain"] == 3000.0  # the default γ
+
+    first = controller.compute(ControlInput(0.0, q, v, flags)).diagnostics["weighted"]
+    assert first["angular_momentum_weight"] == 2.0  # nothing measured, nothing commanded yet
+
+    measured = controller.compute(ControlInput(0.0, q, v, flags, wrenches)).diagnostics
+    beta = measured["weighted"]["angular_momentum_weight"]
+    assert beta == pytest.approx(2.0 + 3000.0 * d, rel=1e-9)
+
+    controller.set_params({"angular_momentum_gain": 500.0, "weight_angular_momentum": 0.0})
+    measured = controller.compute(ControlInput(0.0, q, v, flags, wrenches)).diagnostics
+    assert measured["weighted"]["angular_momentum_weight"] == pytest.approx(500.0 * d, rel=1e-9)
+
+    # Without a measurement, the previous command's wrench: its COP and CMP (as reported)
+    # are millimetres apart at rest, not d.
+    unmeasured = controller.compute(ControlInput(0.0, q, v, flags)).diagnostics
+    assert unmeasured["weighted"]["angular_momentum_weight"] == pytest.approx(
+        500.0
+        * np.linalg.norm(
+            (measured["center_of_pressure"] - measured["centroidal_moment_pivot"])[:2]
+        ),
+        rel=1e-6,
+        abs=1e-9,
+    )
+    assert unmeasured["weighted"]["angular_momentum_weight"] < 500.0 * d / 4
