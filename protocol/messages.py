@@ -283,7 +283,10 @@ class WeightedDiagnostics(_Strict):
         "Whether the optimizer ran this tick (else the last accelerations were reused)."
     )
     angular_momentum_weight: float = wire_field(
-        "β_ba = β_0 + γ ‖p − g‖ used this tick (eq. 5.17; β_0 = 0 in the thesis)."
+        "β_ba = β_0 + γ ‖p − g‖ used this tick (eq. 5.17): p and g of the state's measured "
+        "`contact_wrench_in_world` when it carries one, else of the previous command's "
+        "wrench (then they are this table's `center_of_pressure` and `centroidal_moment_pivot` "
+        "of the previous tick)."
     )
     objective_condition_number: float = wire_field(
         "Condition number of the damped objective Hessian M (App. D), LAPACK's 1-norm estimate.",
