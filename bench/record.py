@@ -27,22 +27,8 @@ import numpy as np
 from mcap.reader import make_reader
 
 from clients import ControllerClient
-from clients.layout import neutral_joint_position
 from clients.server_process import ServerProcess
 from clients.state import RobotState
-from protocol.messages import State, Welcome
-
-
-def standing_state(welcome: Welcome) -> State:
-    nv = sum(joint.nv for joint in welcome.joints)
-    return RobotState(
-        neutral_joint_position(welcome.joints),
-        np.zeros(nv),
-        np.array(welcome.standing_position_base_in_world),
-        np.array([0.0, 0.0, 0.0, 1.0]),
-        np.zeros(3),
-        np.zeros(3),
-    ).to_message(0.0, [True] * len(welcome.contacts))
 
 
 def paced_block(step: Callable[[], object], ticks: int) -> np.ndarray:
@@ -63,7 +49,9 @@ def compare(
     plain: ControllerClient, recorded: ControllerClient, blocks: int, block_ticks: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """Alternate blocks of the two loops; their tick times."""
-    state = standing_state(plain.welcome)
+    welcome = plain.welcome
+    assert welcome is not None
+    state = RobotState.standing(welcome).to_message(0.0, [True] * len(welcome.contacts))
     times: dict[str, list[np.ndarray]] = {"plain": [], "recorded": []}
     for _ in range(blocks):
         times["plain"].append(paced_block(lambda: plain.step(state), block_ticks))

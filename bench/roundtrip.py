@@ -20,7 +20,6 @@ import zmq
 from baselines import echo_server
 
 from clients import ControllerClient
-from clients.layout import neutral_joint_position
 from clients.server_process import ServerProcess
 from clients.state import RobotState
 from protocol import encode
@@ -54,16 +53,7 @@ def main() -> None:
 
     with ServerProcess() as server, ControllerClient(server.endpoint, timeout_s=10.0) as client:
         welcome = client.connect(args.model)
-        joints = list(welcome.joints)
-        nv = sum(j.nv for j in joints)
-        state = RobotState(
-            neutral_joint_position(joints),
-            np.zeros(nv),
-            np.array(welcome.standing_position_base_in_world),
-            np.array([0.0, 0.0, 0.0, 1.0]),
-            np.zeros(3),
-            np.zeros(3),
-        ).to_message(0.0, [True] * len(welcome.contacts))
+        state = RobotState.standing(welcome).to_message(0.0, [True] * len(welcome.contacts))
         command = client.step(state)
         request_size, reply_size = len(encode(state)), len(encode(command))
         poise = {

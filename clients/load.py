@@ -17,7 +17,6 @@ import msgpack
 import numpy as np
 import zmq
 
-from clients.layout import neutral_joint_position
 from clients.state import RobotState
 from protocol.codec import decode, encode
 from protocol.errors import ErrorCode
@@ -55,15 +54,7 @@ class ClientLoad:
 
 def standing_request(welcome: Welcome) -> bytes:
     """An encoded ``state``: the neutral pose standing, at rest, both feet supporting."""
-    joints = list(welcome.joints)
-    state = RobotState(
-        neutral_joint_position(joints),
-        np.zeros(sum(j.nv for j in joints)),
-        np.array(welcome.standing_position_base_in_world),
-        np.array([0.0, 0.0, 0.0, 1.0]),
-        np.zeros(3),
-        np.zeros(3),
-    ).to_message(0.0, [True] * len(welcome.contacts))
+    state = RobotState.standing(welcome).to_message(0.0, [True] * len(welcome.contacts))
     return encode(state)
 
 

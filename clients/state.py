@@ -7,7 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from protocol.messages import Command, State
+from clients.layout import neutral_joint_position
+from protocol.messages import Command, State, Welcome
 
 __all__ = ["RobotState"]
 
@@ -22,6 +23,22 @@ class RobotState:
     orientation_base_in_world_xyzw: np.ndarray
     linear_velocity_base_in_world: np.ndarray
     angular_velocity_base_in_base: np.ndarray
+
+    @classmethod
+    def standing(cls, welcome: Welcome, joint_position: np.ndarray | None = None) -> RobotState:
+        """At rest, upright, at ``welcome``'s standing height, in the neutral pose.
+
+        ``joint_position`` (wire order) replaces the neutral pose if given.
+        """
+        joints = list(welcome.joints)
+        return cls(
+            neutral_joint_position(joints) if joint_position is None else joint_position,
+            np.zeros(sum(joint.nv for joint in joints)),
+            np.array(welcome.standing_position_base_in_world),
+            np.array([0.0, 0.0, 0.0, 1.0]),
+            np.zeros(3),
+            np.zeros(3),
+        )
 
     def to_message(
         self,

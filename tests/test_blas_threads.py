@@ -22,6 +22,19 @@ def test_the_test_process_runs_blas_on_one_thread():
     assert set(threads.values()) == {1}, threads
 
 
+def run_without_blas_variables(script: str, timeout_s: float, **variables: str) -> str:
+    """Stdout of ``python -c script`` with none of the BLAS variables set but ``variables``."""
+    environment = {k: v for k, v in os.environ.items() if k not in BLAS_THREAD_VARIABLES}
+    return subprocess.run(
+        [sys.executable, "-c", script],
+        env={**environment, **variables},
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        check=True,
+    ).stdout
+
+
 def test_poise_runs_blas_on_one_thread_when_nobody_set_it():
     # `poise list joints` loads the model with Pinocchio, so numpy's BLAS starts inside main().
     script = (
@@ -32,15 +45,7 @@ def test_poise_runs_blas_on_one_thread_when_nobody_set_it():
         "pools = {p['internal_api']: p['num_threads'] for p in threadpoolctl.threadpool_info()}\n"
         "print(json.dumps({'code': code, 'pools': pools}))\n"
     )
-    environment = {k: v for k, v in os.environ.items() if k not in BLAS_THREAD_VARIABLES}
-    output = subprocess.run(
-        [sys.executable, "-c", script],
-        env=environment,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=True,
-    ).stdout
+    output = run_without_blas_variables(script, timeout_s=120)
     result = json.loads(output.splitlines()[-1])
     assert result["code"] == 0
     assert result["pools"] and set(result["pools"].values()) == {1}, result
@@ -53,14 +58,5 @@ def test_a_thread_count_the_user_set_is_kept():
         "main(['list', 'models'])\n"
         "print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_NUM_THREADS'])\n"
     )
-    environment = {k: v for k, v in os.environ.items() if k not in BLAS_THREAD_VARIABLES}
-    environment["OPENBLAS_NUM_THREADS"] = "2"
-    output = subprocess.run(
-        [sys.executable, "-c", script],
-        env=environment,
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=True,
-    ).stdout
+    output = run_without_blas_variables(script, timeout_s=60, OPENBLAS_NUM_THREADS="2")
     assert output.splitlines()[-1] == "2 1"

@@ -97,14 +97,7 @@ def standing_state(welcome: Welcome, joint_overrides: dict[str, list[float]]) ->
                 f"{joint.nq} number(s), e.g. {example}"
             )
         position[slices[name][0]] = value
-    return RobotState(
-        joint_position=position,
-        joint_velocity=np.zeros(sum(j.nv for j in joints)),
-        position_base_in_world=np.array(welcome.standing_position_base_in_world),
-        orientation_base_in_world_xyzw=np.array([0.0, 0.0, 0.0, 1.0]),
-        linear_velocity_base_in_world=np.zeros(3),
-        angular_velocity_base_in_base=np.zeros(3),
-    )
+    return RobotState.standing(welcome, position)
 
 
 @dataclass
