@@ -29,21 +29,22 @@ Pinocchio's RNEA and no mass matrix, and defers to
 
 from __future__ import annotations
 
+import ctypes
 import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 
+import daqp
 import numpy as np
 import pinocchio as pin
 import qpsolvers
-import scipy.linalg
-import scipy.linalg.lapack
+from scipy.linalg import lapack
 
 from controller_server.dynamics import ContactGeometry, DynamicsTerms
 from controller_server.models import RobotModel
-from controller_server.solvers.prioritized import solve_qp_bounded
+from controller_server.solvers.prioritized import QP_ITERATION_LIMITS, solve_qp_bounded
 from controller_server.spatial import wrench_map
 
 __all__ = [
@@ -225,7 +226,10 @@ def _realize(
     saturated = int(np.count_nonzero(np.abs(joint_torque - torque_unclipped) > 1e-6))
     applied = contact_generalized_force - h
     applied[NUM_ROOT_DOFS:] += joint_torque
-    realized = scipy.linalg.cho_solve(scipy.linalg.cho_factor(M), applied)
+    lower, info = lapack.dpotrf(M, lower=1, clean=0)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"the mass matrix is not positive definite (potrf info {info})")
+    realized, _ = lapack.dpotrs(lower, applied, lower=1)
     return InverseDynamicsResult(joint_torque, forces, wrenches, realized, residual, saturated)
 
 
@@ -256,7 +260,7 @@ def minimum_norm_balance(
     are admissible they also solve ``min ‖f‖² s.t. G f = w, f in cones`` (the
     common case when standing), with no solver call.
     """
-    _, multipliers, info = scipy.linalg.lapack.dposv(G @ G.T, wrench)  # Cholesky solve
+    _, multipliers, info = lapack.dposv(G @ G.T, wrench)  # Cholesky solve
     if info != 0:  # G G^T not positive definite: the points cannot balance every wrench
         return None
     forces = G.T @ multipliers
@@ -319,24 +323,36 @@ def nearest_feasible_motion(
     the unknowns-``[q̈, f]`` formulation of de Lasa et al. 2010 (§ 4) used as a
     projection, not as the controller.
 
+    Without the torque rows, ``q̈`` can be eliminated exactly (see
+    :func:`_condensed_motion`), leaving a QP in the forces alone, half the
+    unknowns and a third of the rows. Its answer solves the full problem
+    whenever its torques are within their limits (the usual case: a relaxation
+    whose optimum is feasible is optimal); otherwise the full QP is solved.
+
     Returns:
         ``(q̈, f)`` or ``None`` if the solver gives no finite answer.
     """
     M, h = terms.mass_matrix, terms.bias_forces
     nv, forces = h.size, point_jacobian.shape[0]
+    J_sup = np.vstack(support_jacobians) if support_jacobians else np.zeros((0, nv))
+    drift = np.concatenate(support_drifts) if support_drifts else np.zeros(0)
+    cones = friction_pyramid(friction_coefficients)
+    condensed = _condensed_motion(
+        M, h, acceleration, point_jacobian, J_sup, drift, cones, force_regularization,
+        support_weight, qp_solver,
+    )  # fmt: skip
+    if condensed is not None:
+        motion, point_force = condensed
+        torque = (M @ motion + h - point_jacobian.T @ point_force)[NUM_ROOT_DOFS:]
+        if (np.abs(torque) <= torque_limit).all():
+            return motion, point_force
     hessian = np.zeros((nv + forces, nv + forces))
-    hessian[:nv, :nv] = M
+    hessian[:nv, :nv] = M + support_weight * J_sup.T @ J_sup
     gradient = np.zeros(nv + forces)
-    gradient[:nv] = -M @ acceleration
-    if support_jacobians:
-        J_sup = np.vstack(support_jacobians)
-        drift = np.concatenate(support_drifts)
-        hessian[:nv, :nv] += support_weight * J_sup.T @ J_sup
-        gradient[:nv] += support_weight * J_sup.T @ drift
+    gradient[:nv] = support_weight * J_sup.T @ drift - M @ acceleration
     hessian[nv:, nv:] = force_regularization * np.eye(forces)
     # (M q̈ + h − J_cᵀ f) = [root wrench; τ]; the root rows are the equality.
     dynamics = np.hstack([M, -point_jacobian.T])
-    cones = friction_pyramid(friction_coefficients)
     inequality = np.vstack(
         [
             np.hstack([np.zeros((cones.shape[0], nv)), cones]),
@@ -360,6 +376,64 @@ def nearest_feasible_motion(
     if solution is None:
         return None
     return solution[:nv], solution[nv:]
+
+
+def _condensed_motion(
+    M: np.ndarray,
+    h: np.ndarray,
+    acceleration: np.ndarray,
+    point_jacobian: np.ndarray,
+    J_sup: np.ndarray,
+    drift: np.ndarray,
+    cones: np.ndarray,
+    force_regularization: float,
+    support_weight: float,
+    qp_solver: str,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`nearest_feasible_motion` without its torque rows, by eliminating ``q̈``.
+
+    With ``q̈ = q̈_des + Δ``, ``N = M + w_s J_supᵀ J_sup``, ``g = w_s J_supᵀ (J_sup q̈_des
+    + J̇_sup q̇)`` and ``B = M_root`` (the root rows of ``M``), the motion part is
+    ``min ½ Δᵀ N Δ + gᵀ Δ s.t. B Δ = r`` with ``r = A f − w``, ``A = (J_cᵀ)_root``,
+    ``w = (M q̈_des + h)_root``. Its minimizer is ``Δ = Δ₀ + Y K⁻¹ (r − B Δ₀)`` with
+    ``Δ₀ = −N⁻¹ g``, ``Y = N⁻¹ Bᵀ``, ``K = B Y`` (6 × 6), and its value
+    ``½ (r − B Δ₀)ᵀ K⁻¹ (r − B Δ₀)`` up to a constant. What is left is a QP in ``f``::
+
+        min ½ (A f − c)ᵀ K⁻¹ (A f − c) + ½ ε ‖f‖²   s.t.  f in the pyramids,  c = w + B Δ₀
+
+    Returns:
+        ``(q̈, f)``, or ``None`` if a factorization or the QP fails.
+    """
+    N = M + support_weight * (J_sup.T @ J_sup) if len(J_sup) else M
+    lower, info = lapack.dpotrf(N, lower=1, clean=0)
+    if info != 0:
+        return None
+    root = M[:NUM_ROOT_DOFS]
+    rhs = np.empty((h.size, NUM_ROOT_DOFS + 1))
+    rhs[:, :NUM_ROOT_DOFS] = root.T
+    rhs[:, NUM_ROOT_DOFS] = (
+        -support_weight * (J_sup.T @ (J_sup @ acceleration + drift)) if len(J_sup) else 0.0
+    )
+    solved, info = lapack.dpotrs(lower, rhs, lower=1)
+    if info != 0:
+        return None
+    Y, delta_free = solved[:, :NUM_ROOT_DOFS], solved[:, NUM_ROOT_DOFS]
+    K = root @ Y
+    A = point_jacobian[:, :NUM_ROOT_DOFS].T
+    c = (M[:NUM_ROOT_DOFS] @ acceleration + h[:NUM_ROOT_DOFS]) + root @ delta_free
+    K_lower, info = lapack.dpotrf(K, lower=1, clean=0)
+    if info != 0:
+        return None
+    K_inv_A, _ = lapack.dpotrs(K_lower, A, lower=1)
+    hessian = A.T @ K_inv_A
+    hessian.flat[:: hessian.shape[0] + 1] += force_regularization
+    point_force = _solve_qp(
+        hessian, -K_inv_A.T @ c, cones, np.zeros(cones.shape[0]), qp_solver=qp_solver
+    )
+    if point_force is None:
+        return None
+    K_inv_residual, _ = lapack.dpotrs(K_lower, A @ point_force - c, lower=1)
+    return acceleration + delta_free + Y @ K_inv_residual, point_force
 
 
 def _solve_qp(
@@ -389,16 +463,49 @@ def _solve_qp(
     k = max(1.0, scale / QP_DATA_SCALE)
     if k > 1.0:
         q, h, b = q / k, h / k, None if b is None else b / k
-    try:
-        solution = solve_qp_bounded(
-            qpsolvers.Problem(P, q, G, h, A, b), qp_solver, **QP_SETTINGS.get(qp_solver, {})
-        )
-    except (ValueError, np.linalg.LinAlgError, qpsolvers.ProblemError, qpsolvers.SolverError):
-        return None  # e.g. quadprog's "constraints are inconsistent", "P is not definite"
-    if not solution.found or solution.x is None:
+    if qp_solver == "daqp":
+        x = _solve_daqp(P, q, G, h, A, b)
+    else:
+        try:
+            solution = solve_qp_bounded(
+                qpsolvers.Problem(P, q, G, h, A, b), qp_solver, **QP_SETTINGS.get(qp_solver, {})
+            )
+        except (ValueError, np.linalg.LinAlgError, qpsolvers.ProblemError, qpsolvers.SolverError):
+            return None  # e.g. quadprog's "constraints are inconsistent", "P is not definite"
+        x = solution.x if solution.found else None
+    if x is None:
         return None
-    x = solution.x * k if k > 1.0 else solution.x
+    x = x * k if k > 1.0 else x
     return x if np.all(np.isfinite(x)) else None
+
+
+def _solve_daqp(
+    P: np.ndarray,
+    q: np.ndarray,
+    G: np.ndarray,
+    h: np.ndarray,
+    A: np.ndarray | None,
+    b: np.ndarray | None,
+) -> np.ndarray | None:
+    """DAQP called directly: the same problem and iteration cap as through ``qpsolvers``.
+
+    ``qpsolvers`` re-checks and restacks every matrix on each call, which cost more than the
+    solve itself for these small problems; here the rows are stacked once, equalities last
+    (DAQP's ``sense`` 5: an active equality, as ``qpsolvers`` passes them).
+    """
+    if A is None or not len(A):
+        rows, upper, lower, sense = G, h, np.full(h.size, -np.inf), None
+    else:
+        rows = np.vstack([G, A])
+        upper = np.concatenate([h, b])
+        lower = np.concatenate([np.full(h.size, -np.inf), b])
+        sense = np.zeros(upper.size, dtype=ctypes.c_int)
+        sense[h.size :] = 5
+    x, _, exitflag, _ = daqp.solve(
+        np.ascontiguousarray(P), q, np.ascontiguousarray(rows), upper, lower, sense,
+        iter_limit=QP_ITERATION_LIMITS["daqp"]["iter_limit"],
+    )  # fmt: skip
+    return x if exitflag > 0 else None
 
 
 def wrenches_from_point_forces(
