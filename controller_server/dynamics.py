@@ -24,7 +24,6 @@ q_joints]``, ``v = [v_base_in_base, ω_base_in_base, v_joints]``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cache
 
 import numpy as np
 import pinocchio as pin
@@ -143,8 +142,8 @@ def _points_on_frame(
     count = len(offsets)
     point_wrench_map = wrench_map(offsets)
     omega = velocity.angular
-    # ω × (ω × r) = (ω ωᵀ − |ω|² I) r
-    centripetal = offsets @ (np.outer(omega, omega) - (omega @ omega) * np.eye(3))
+    # ω × (ω × r) = ω (ω · r) − |ω|² r
+    centripetal = np.outer(offsets @ omega, omega) - (omega @ omega) * offsets
     transposed = point_wrench_map.T
     return PointKinematics(
         position_in_world=placement.translation + offsets,
@@ -153,11 +152,6 @@ def _points_on_frame(
         drift=transposed @ drift.vector + centripetal.reshape(-1),
         wrench_map=point_wrench_map,
     )
-
-
-@cache
-def _lower_triangle(size: int) -> tuple[np.ndarray, np.ndarray]:
-    return np.tril_indices(size, -1)
 
 
 def compute_dynamics_terms(
@@ -176,10 +170,9 @@ def compute_dynamics_terms(
     """
     model = robot.model
     pin.computeAllTerms(model, data, q, v)
-    # Pinocchio fills the upper triangle of M; mirror it (indices cached per size).
-    mass_matrix = data.M.copy()
-    lower = _lower_triangle(model.nv)
-    mass_matrix[lower] = mass_matrix.T[lower]
+    # Pinocchio fills the upper triangle of M; mirror it.
+    upper = np.triu(data.M)
+    mass_matrix = upper + np.triu(upper, 1).T
     bias_forces = data.nle.copy()
     position_com = data.com[0].copy()
     total_mass = float(data.mass[0])

@@ -52,6 +52,12 @@ def check_finite_dynamics(terms: DynamicsTerms) -> None:
             momentum.angular_momentum,
         ),
     }
+    # One sum over everything first: NaN and ±inf propagate through it (the common case is
+    # one reduction); only a non-finite sum (or an overflowing one) looks at each group.
+    if math.isfinite(
+        float(np.concatenate([a for arrays in groups.values() for a in arrays]).sum())
+    ):
+        return
     bad = [name for name, arrays in groups.items() if not all(np.isfinite(a).all() for a in arrays)]
     if bad:
         raise ControllerFailed(

@@ -59,6 +59,7 @@ from controller_server.dynamics import (
 )
 from controller_server.errors import InvalidParams
 from controller_server.features import (
+    JointLimitSet,
     MotionClip,
     Objective,
     PointTarget,
@@ -70,7 +71,6 @@ from controller_server.features import (
     compute_tracking_objective,
     default_joint_limits,
     desired_linear_momentum_rate,
-    joint_limit_errors,
     load_motion_clip,
     soft_limit_gains,
 )
@@ -226,7 +226,7 @@ class MomentumController(Controller):
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self._data = robot.model.createData()
-        self._limits = default_joint_limits(robot)
+        self._limits = JointLimitSet(default_joint_limits(robot), robot.model.nv)
         self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._clip: MotionClip | None = None
         self._points: dict[str, PointTarget] = {}
@@ -453,7 +453,7 @@ class MomentumController(Controller):
         p, model = self._params, self.robot.model
         q, v = control_input.q, control_input.v
         q_ref, v_ref, a_ref = self._reference(control_input)
-        errors = joint_limit_errors(self._limits, q, model.nv)
+        errors = self._limits.errors(q)
         stiffness, damping = soft_limit_gains(
             p["stiffness"],
             p["damping"],

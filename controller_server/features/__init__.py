@@ -7,6 +7,7 @@ from controller_server.features.angular_momentum import (
 from controller_server.features.contact_points import compute_ground_contact_objective
 from controller_server.features.joint_limits import (
     BallJointLimit,
+    JointLimitSet,
     RevoluteJointLimit,
     default_joint_limits,
     joint_limit_errors,
@@ -26,6 +27,7 @@ from controller_server.features.tracking import compute_tracking_objective
 __all__ = [
     "BallJointLimit",
     "ClipSample",
+    "JointLimitSet",
     "MotionClip",
     "Objective",
     "PointTarget",

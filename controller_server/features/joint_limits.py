@@ -21,7 +21,14 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 
 from controller_server.errors import ModelError
-from controller_server.features.swing_twist import SwingCone, rotate, swing_twist, twist_angle
+from controller_server.features.swing_twist import (
+    SwingCone,
+    cones_contain_units,
+    rotate,
+    swing_twist,
+    twist_angle,
+)
+from controller_server.spatial import cross
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
@@ -31,6 +38,7 @@ if TYPE_CHECKING:
 __all__ = [
     "BallJointLimit",
     "JointLimit",
+    "JointLimitSet",
     "RevoluteJointLimit",
     "default_joint_limits",
     "joint_limit_errors",
@@ -216,12 +224,82 @@ def default_joint_limits(robot: RobotModel) -> tuple[JointLimit, ...]:
     return tuple(limits)
 
 
+class JointLimitSet:
+    """A robot's joint limits, screened for violations in one vectorized pass.
+
+    Most joints are inside their limits on most ticks. Box limits are evaluated
+    for all 1-DoF joints at once; for ball joints the cheap inside test of
+    :class:`BallJointLimit` runs on all quaternions at once, and only the
+    joints it finds outside go through the exact (per-joint) error.
+
+    Args:
+        limits: Joint limits, e.g. from :func:`default_joint_limits`.
+        nv: Size of the velocity vector.
+    """
+
+    def __init__(self, limits: Iterable[JointLimit], nv: int):
+        self.limits = tuple(limits)
+        self.nv = nv
+        boxes = [limit for limit in self.limits if isinstance(limit, RevoluteJointLimit)]
+        self._box_idx_q = np.array([limit.idx_q for limit in boxes], dtype=int)
+        self._box_idx_v = np.array([limit.idx_v for limit in boxes], dtype=int)
+        self._box_lower = np.array([limit.lower for limit in boxes], dtype=float)
+        self._box_upper = np.array([limit.upper for limit in boxes], dtype=float)
+        self._balls = [limit for limit in self.limits if isinstance(limit, BallJointLimit)]
+        self._ball_idx_q = np.array([limit.idx_q for limit in self._balls], dtype=int)[:, None]
+        self._ball_idx_q = self._ball_idx_q + np.arange(4)
+        self._axes = np.array([limit.bone_axis_in_parent for limit in self._balls]).reshape(-1, 3)
+        self._twist_lower = np.array([limit.twist_lower_rad for limit in self._balls])
+        self._twist_upper = np.array([limit.twist_upper_rad for limit in self._balls])
+        sides = max((len(ball.cone.face_normals_in_parent) for ball in self._balls), default=0)
+        # Faces padded by repeating the first one: the max (min) projection is unchanged.
+        self._normals = np.zeros((len(self._balls), max(sides, 1), 3))
+        for row, ball in zip(self._normals, self._balls, strict=True):
+            normals = ball.cone.face_normals_in_parent
+            if len(normals):
+                row[:] = normals[np.minimum(np.arange(len(row)), len(normals) - 1)]
+        self._reflex = np.array([ball.cone.reflex for ball in self._balls], dtype=bool)
+        self._unlimited = np.array(
+            [not len(ball.cone.face_normals_in_parent) for ball in self._balls], dtype=bool
+        )
+
+    def errors(self, q: np.ndarray) -> np.ndarray:
+        """Limit violation per DoF, ``(nv,)``: as :func:`joint_limit_errors`."""
+        errors = np.zeros(self.nv)
+        if self._box_idx_q.size:
+            value = q[self._box_idx_q]
+            errors[self._box_idx_v] = np.maximum(
+                np.maximum(self._box_lower - value, 0.0), value - self._box_upper
+            )
+        if self._balls:
+            for index in np.flatnonzero(~self._balls_within(q)).tolist():
+                ball = self._balls[index]
+                errors[ball.idx_v : ball.idx_v + 3] = ball.error(q)
+        return errors
+
+    def _balls_within(self, q: np.ndarray) -> np.ndarray:
+        """:meth:`BallJointLimit._within` for every ball joint at once."""
+        quaternions = q[self._ball_idx_q]
+        quaternions = quaternions / np.sqrt((quaternions * quaternions).sum(axis=1))[:, None]
+        u, w = quaternions[:, :3], quaternions[:, 3:]
+        a = self._axes
+        t = 2.0 * cross(u, a)
+        bone = a + w * t + cross(u, t)
+        twist = 2.0 * np.arctan2((u * a).sum(axis=1), w[:, 0])
+        twist = np.where(twist > math.pi, twist - 2 * math.pi, twist)
+        twist = np.where(twist <= -math.pi, twist + 2 * math.pi, twist)
+        inside = cones_contain_units(self._normals, self._reflex, self._unlimited, bone)
+        return inside & (self._twist_lower <= twist) & (twist <= self._twist_upper)
+
+
 def joint_limit_errors(limits: Iterable[JointLimit], q: np.ndarray, nv: int) -> np.ndarray:
     """Limit violation per DoF (Macchietto 2008, §6.2).
 
     Each ball joint's ``e_axis + e_twist`` is written on all 3 of its DoFs,
     since the tracking gains of the whole joint are raised; a 1-DoF joint gets
     its box violation. DoFs without a limit (the free-flyer root) get ``0``.
+    A controller evaluating the same limits every tick keeps a
+    :class:`JointLimitSet` instead.
 
     Args:
         limits: Joint limits, e.g. from :func:`default_joint_limits`.
@@ -231,10 +309,7 @@ def joint_limit_errors(limits: Iterable[JointLimit], q: np.ndarray, nv: int) -> 
     Returns:
         ``(nv,)`` non-negative errors (rad, or m for prismatic joints).
     """
-    errors = np.zeros(nv)
-    for limit in limits:
-        errors[limit.idx_v : limit.idx_v + limit.nv] = limit.error(q)
-    return errors
+    return JointLimitSet(limits, nv).errors(q)
 
 
 def soft_limit_gains(

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["SwingCone", "compose", "rotate", "swing_twist", "twist_angle"]
+__all__ = ["SwingCone", "compose", "cones_contain_units", "rotate", "swing_twist", "twist_angle"]
 
 _TINY = 1e-12
 _DEGENERATE_SWING = 1e-9
@@ -253,6 +253,23 @@ class SwingCone:
             face = int(np.flatnonzero(usable)[np.argmin(projections[usable])])
             nearest = min(nearest, _angle_to_plane(d, normals[face], projections[face]))
         return nearest
+
+
+def cones_contain_units(
+    face_normals: np.ndarray, reflex: np.ndarray, unlimited: np.ndarray, directions: np.ndarray
+) -> np.ndarray:
+    """:meth:`SwingCone.contains_unit` for ``B`` cones and one unit direction each, at once.
+
+    Args:
+        face_normals: ``(B, S, 3)``, each cone's normals, padded to ``S`` rows by
+            repeating one of its own (padding leaves the max and min projection unchanged).
+        reflex: ``(B,)`` :attr:`SwingCone.reflex`.
+        unlimited: ``(B,)`` cones without faces (every direction allowed).
+        directions: ``(B, 3)`` unit directions.
+    """
+    projections = np.einsum("bsk,bk->bs", face_normals, directions)
+    inside = np.where(reflex, projections.min(axis=1) <= _TINY, projections.max(axis=1) <= _TINY)
+    return inside | unlimited
 
 
 def _angle_to_plane(direction: np.ndarray, normal: np.ndarray, projection: float) -> float:

@@ -79,18 +79,39 @@ class DampedFactor:
     Attributes:
         lower: Lower-triangular ``L`` with ``L Lᵀ = G + λ² I``.
         damping: λ.
-        damped_condition: Condition number of ``G + λ² I``, LAPACK's 1-norm
-            estimate (``dpocon``).
+        norm_1: 1-norm of ``G + λ² I`` (for the condition estimate).
     """
 
     lower: np.ndarray
     damping: float
-    damped_condition: float
+    norm_1: float
+
+    @property
+    def damped_condition(self) -> float:
+        """Condition number of ``G + λ² I``, LAPACK's 1-norm estimate (``dpocon``).
+
+        Estimated on demand: only diagnostics read it, and it costs as much as the factor.
+        """
+        reciprocal, _ = lapack.dpocon(self.lower, self.norm_1, uplo="L")
+        return float(max(1.0 / reciprocal, 1.0)) if reciprocal > 0 else math.inf
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """``(G + λ² I)⁻¹ rhs`` for ``(m,)`` or ``(m, k)`` right-hand sides."""
         solution, _ = lapack.dpotrs(self.lower, rhs, lower=1)
         return solution
+
+
+def _shifted(gram: np.ndarray, shift: float) -> np.ndarray:
+    """``G + shift · I`` as a new array."""
+    shifted = np.array(gram, dtype=float)
+    shifted.flat[:: len(shifted) + 1] += shift
+    return shifted
+
+
+def _positive_definite_after_shift(gram: np.ndarray, shift: float) -> bool:
+    """Whether ``G − shift · I`` has a Cholesky factor, i.e. every eigenvalue exceeds ``shift``."""
+    _, info = lapack.dpotrf(_shifted(gram, -shift), lower=1, clean=0, overwrite_a=1)
+    return info == 0
 
 
 def damped_cholesky(gram: np.ndarray, gain_bound: float) -> DampedFactor | None:
@@ -110,23 +131,17 @@ def damped_cholesky(gram: np.ndarray, gain_bound: float) -> DampedFactor | None:
     Returns:
         The factor, or ``None`` if ``G + λ² I`` is not finite or not positive definite.
     """
-    size = len(gram)
-    identity = np.eye(size)
-    lower, info = lapack.dpotrf(gram - gain_bound**-2 * identity, lower=1, clean=1)
-    if info == 0:  # σ_min > 1/B: undamped
-        damping = 0.0
-    else:
-        _, info = lapack.dpotrf(gram - (0.5 / gain_bound) ** 2 * identity, lower=1, clean=1)
-        if info == 0:  # 1/(2B) < σ_min ≤ 1/B: λ depends on σ_min
+    band_edges = (gain_bound**-2, (0.5 / gain_bound) ** 2)  # σ_min² at the band edges
+    if _positive_definite_after_shift(gram, band_edges[1]):  # σ_min > 1/(2B)
+        if _positive_definite_after_shift(gram, band_edges[0]):  # σ_min > 1/B: undamped
+            damping = 0.0
+        else:  # 1/(2B) < σ_min ≤ 1/B: λ depends on σ_min
             sigma_min = math.sqrt(max(float(np.linalg.eigvalsh(gram)[0]), 0.0))
             damping = damping_for_gain_bound(sigma_min, gain_bound)
-        else:  # σ_min ≤ 1/(2B)
-            damping = 0.5 / gain_bound
-    damped = gram + damping**2 * identity if damping else gram
+    else:  # σ_min ≤ 1/(2B)
+        damping = 0.5 / gain_bound
+    damped = _shifted(gram, damping**2) if damping else gram
     lower, info = lapack.dpotrf(damped, lower=1, clean=1)
     if info != 0 or not np.all(np.isfinite(lower)):
         return None
-    norm = float(np.abs(damped).sum(axis=0).max())
-    reciprocal, _ = lapack.dpocon(lower, norm, uplo="L")
-    damped_condition = max(1.0 / reciprocal, 1.0) if reciprocal > 0 else math.inf
-    return DampedFactor(lower, damping, float(damped_condition))
+    return DampedFactor(lower, damping, float(np.abs(damped).sum(axis=0).max()))

@@ -33,7 +33,7 @@ import numpy as np
 
 from controller_server.constraints import Equality
 from controller_server.features.objective import Objective
-from controller_server.solvers.damped import damped_cholesky, damped_solve_psd
+from controller_server.solvers.damped import DampedFactor, damped_cholesky, damped_solve_psd
 
 __all__ = ["KKTSolution", "WeightedProblem", "build_weighted_problem", "solve_weighted_kkt"]
 
@@ -72,10 +72,11 @@ class KKTSolution:
         multipliers: ``λ`` of eq. D.7.
         objective_damping: λ_obj used on the objective stack.
         constraint_damping: λ_con used on the Schur complement.
-        objective_condition_number: Condition number of the damped ``M``.
-        schur_condition_number: Condition number of ``C M⁻¹ Cᵀ`` before damping.
         constraint_residual: ``‖C x − d‖`` (non-zero only where damped).
         solve_time_s: Time spent solving (s).
+        objective_factor: Factor of the damped ``M`` (``None`` if it failed).
+        schur_conditioning: Factor of the Schur complement, or its condition number
+            where that is known without one.
     """
 
     found: bool
@@ -84,10 +85,22 @@ class KKTSolution:
     multipliers: np.ndarray
     objective_damping: float
     constraint_damping: float
-    objective_condition_number: float
-    schur_condition_number: float
     constraint_residual: float
     solve_time_s: float
+    objective_factor: DampedFactor | None
+    schur_conditioning: DampedFactor | float
+
+    @property
+    def objective_condition_number(self) -> float:
+        """Condition number of the damped ``M`` (estimated on demand: diagnostics only)."""
+        factor = self.objective_factor
+        return factor.damped_condition if factor is not None else math.inf
+
+    @property
+    def schur_condition_number(self) -> float:
+        """Condition number of ``C M⁻¹ Cᵀ`` before damping (estimated on demand)."""
+        schur = self.schur_conditioning
+        return schur.damped_condition if isinstance(schur, DampedFactor) else schur
 
 
 def build_weighted_problem(
@@ -132,35 +145,28 @@ def solve_weighted_kkt(problem: WeightedProblem) -> KKTSolution:
     if factor is None:
         failed = np.zeros(n)
         return KKTSolution(
-            False,
-            failed,
-            failed,
-            np.zeros(len(d)),
-            math.nan,
-            0.0,
-            math.inf,
-            math.inf,
-            math.inf,
-            time.perf_counter() - start,
-        )
+            False, failed, failed, np.zeros(len(d)), math.nan, 0.0, math.inf,
+            time.perf_counter() - start, None, math.inf,
+        )  # fmt: skip
     x_free = factor.solve(problem.gradient)
+    schur_conditioning: DampedFactor | float
     if C.shape[0] == 0:
-        multipliers, constraint_damping, schur_condition, x = np.zeros(0), 0.0, 1.0, x_free
+        multipliers, constraint_damping, schur_conditioning, x = np.zeros(0), 0.0, 1.0, x_free
     else:
         M_inv_CT = factor.solve(C.T)
         schur = C @ M_inv_CT
         schur_factor = damped_cholesky(schur, problem.constraint_gain_bound)
         if schur_factor is None:
-            multipliers, constraint_damping, schur_condition = damped_solve_psd(
+            multipliers, constraint_damping, schur_conditioning = damped_solve_psd(
                 schur, d - C @ x_free, problem.constraint_gain_bound
             )
         else:
             multipliers = schur_factor.solve(d - C @ x_free)
             constraint_damping = schur_factor.damping
-            schur_condition = schur_factor.damped_condition
+            schur_conditioning = schur_factor
             if constraint_damping > 0:  # report the undamped Schur complement's conditioning
                 eigenvalues = np.linalg.eigvalsh(schur)
-                schur_condition = (
+                schur_conditioning = (
                     float(eigenvalues[-1] / eigenvalues[0]) if eigenvalues[0] > 0 else math.inf
                 )
         x = x_free + M_inv_CT @ multipliers
@@ -174,8 +180,8 @@ def solve_weighted_kkt(problem: WeightedProblem) -> KKTSolution:
         multipliers=multipliers,
         objective_damping=factor.damping,
         constraint_damping=constraint_damping,
-        objective_condition_number=factor.damped_condition,
-        schur_condition_number=float(schur_condition),
         constraint_residual=float(np.linalg.norm(C @ x - d)) if found else math.inf,
         solve_time_s=time.perf_counter() - start,
+        objective_factor=factor,
+        schur_conditioning=schur_conditioning,
     )

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from controller_server.features.joint_limits import (
     BallJointLimit,
+    JointLimitSet,
     RevoluteJointLimit,
     default_joint_limits,
     joint_limit_errors,
@@ -359,3 +360,24 @@ def test_revolute_knee_beyond_its_limit():
     errors = joint_limit_errors(limits, q, robot.model.nv)
     assert errors[knee.idx_v] == pytest.approx(0.25)
     assert np.count_nonzero(errors) == 1
+
+
+@pytest.mark.parametrize("name", ["thesis_humanoid", "revolute_humanoid", "dino_biped"])
+def test_the_vectorized_screen_agrees_with_each_joints_own_error(name):
+    """JointLimitSet screens all joints at once; per joint, the error must be the joint's own."""
+    robot = load_robot_model(name)
+    limits = default_joint_limits(robot)
+    limit_set = JointLimitSet(limits, robot.model.nv)
+    rng = np.random.default_rng(7)
+    outside = 0
+    for _ in range(300):  # random configurations, many of them past some limit
+        q = pin.randomConfiguration(
+            robot.model, -np.full(robot.model.nq, 2.5), np.full(robot.model.nq, 2.5)
+        )
+        q[3:7] = [0.0, 0.0, 0.0, 1.0]
+        expected = np.zeros(robot.model.nv)
+        for limit in limits:
+            expected[limit.idx_v : limit.idx_v + limit.nv] = limit.error(q)
+        np.testing.assert_array_equal(limit_set.errors(q), expected)
+        outside += int(np.count_nonzero(expected) > 0)
+    assert outside > 100  # the screen was exercised on both sides
