@@ -1,83 +1,146 @@
-"""Per-tick compute time of the controllers against a same-run baseline.
+"""Per-tick compute time of the controllers against a floor measured in the same run.
 
-For each built-in model: the `momentum` controller (all objectives on), the
-`tracking` baseline controller and the `prioritized` controller (de Lasa
-2010, default priorities), in-process (no network), on 1,000 seeded states
-near standing (the prioritized one on the first fifth: it is the slow one).
-Baseline, measured in the same run on the same states: Pinocchio's dynamics
-terms (`computeAllTerms`) plus one dense QP of the same size as the
-controller's problem (nv unknowns, 12 support equalities), solved by ProxQP
-through qpsolvers.
+For each built-in model: the `tracking` baseline, the `momentum` controller
+(all objectives on) and the `prioritized` controller (de Lasa 2010, default
+priorities), in-process (no network), each running its optimizer on every
+tick (`optimizer_period_ticks = 1`), without diagnostics (as on the ticks
+that carry none), on the same seeded states near standing (random pose,
+velocities and contact flags: every tick is a fresh problem, as for a
+stateless per-tick solver such as TSID). The momentum controller is also
+timed on the recorded states of a real balance run under a push (the replay
+fixture), where the perturbations are those of a run rather than random.
 
-Usage: python bench/controller.py [--ticks 1000]
+The floor, measured in the same run and in alternating chunks with the
+controllers (so that both see the same machine load): Pinocchio's
+`computeAllTerms` plus the centroidal map plus one DAQP solve of the size of
+the momentum controller's problem (nv unknowns, 12 support equalities),
+called directly. Issue 15's goals: `momentum` ≤ 2× the floor, `prioritized`
+p50 ≤ 1 ms.
+
+Usage: python bench/controller.py [--ticks 600] [--chunks 3]
 """
 
 from __future__ import annotations
 
-import argparse
-import time
+from controller_server.blas import default_to_single_threaded_blas
 
-import numpy as np
-import pinocchio as pin
-import qpsolvers
+default_to_single_threaded_blas()  # before numpy: see controller_server/blas.py
 
-from clients.sampling import random_state
-from controller_server.controllers import create_controller
-from controller_server.models import BUILTIN_MODELS, load_robot_model
-from controller_server.session import Session
-from controller_server.wire import control_input_from_state
-from protocol.messages import Hello
+import argparse  # noqa: E402
+import ctypes  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import daqp  # noqa: E402
+import numpy as np  # noqa: E402
+import pinocchio as pin  # noqa: E402
+
+from clients.sampling import random_state  # noqa: E402
+from controller_server.controllers import create_controller  # noqa: E402
+from controller_server.models import BUILTIN_MODELS, load_robot_model  # noqa: E402
+from controller_server.session import Session  # noqa: E402
+from controller_server.wire import control_input_from_state  # noqa: E402
+from protocol.messages import Hello, State  # noqa: E402
+from protocol.recording import read_log  # noqa: E402
+
+CONTROLLERS = ("tracking", "momentum", "prioritized")
+RECORDED_STATES = Path(__file__).parent.parent / "tests" / "fixtures" / "replay_momentum_push.mcap"
+MOMENTUM_GOAL_RATIO = 2.0
+PRIORITIZED_GOAL_S = 1e-3
 
 
-def percentiles(samples: list[float]) -> tuple[float, float]:
-    return float(np.percentile(samples, 50)), float(np.percentile(samples, 99))
+class Floor:
+    """Pinocchio dynamics terms + centroidal map + one direct DAQP solve (nv unknowns, 12 rows)."""
+
+    def __init__(self, model: pin.Model, rng: np.random.Generator):
+        self.model, self.data = model, model.createData()
+        nv = model.nv
+        self.hessian = np.eye(nv) + 0.1 * np.ones((nv, nv))
+        self.rows = rng.normal(size=(12, nv))
+        self.sense = np.full(12, 5, dtype=ctypes.c_int)  # equalities
+        self.rng = rng
+
+    def tick(self, control_input) -> None:
+        q, v = control_input.q, control_input.v
+        pin.computeAllTerms(self.model, self.data, q, v)
+        pin.computeCentroidalMap(self.model, self.data, q)
+        gradient, rhs = self.rng.normal(size=self.model.nv), self.rng.normal(size=12)
+        daqp.solve(self.hessian, gradient, self.rows, rhs, rhs, self.sense)
 
 
-def baseline_tick(model, data, q, v, P, c, C, d) -> None:
-    pin.computeAllTerms(model, data, q, v)
-    qpsolvers.solve_qp(P, c, A=C, b=d, solver="proxqp")
+def timed(step, items) -> list[float]:
+    times = []
+    for item in items:
+        start = time.perf_counter()
+        step(item)
+        times.append(time.perf_counter() - start)
+    return times
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--ticks", type=int, default=1000)
+    parser.add_argument("--ticks", type=int, default=600, help="random states per model")
+    parser.add_argument("--chunks", type=int, default=3, help="alternations floor/controllers")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
-    header = f"{'model':<19}{'nv':>4}{'controller':>12}{'p50 µs':>9}{'p99 µs':>9}"
-    header += f"{'base p50':>10}{'base p99':>10}{'p50 ratio':>11}{'p99 ratio':>11}"
-    print(header)
+    print(
+        f"{'model':<19}{'nv':>4}{'controller':>13}{'states':>10}{'p50 µs':>9}{'p99 µs':>9}"
+        f"{'floor p50':>11}{'p50/floor':>11}{'p99/floor':>11}  goal"
+    )
     for name in BUILTIN_MODELS:
         robot = load_robot_model(name)
-        model = robot.model
         welcome = Session(Hello(model=name)).welcome(0)
-        inputs = [
-            control_input_from_state(robot, random_state(welcome, rng)) for _ in range(args.ticks)
+        random_inputs = [
+            control_input_from_state(robot, random_state(welcome, rng), want_diagnostics=False)
+            for _ in range(args.ticks)
         ]
-        data = model.createData()
-        P = np.eye(model.nv) + 0.1 * np.ones((model.nv, model.nv))
-        C = rng.normal(size=(12, model.nv))
-        base = []
-        for control_input in inputs:
-            c, d = rng.normal(size=model.nv), rng.normal(size=12)
-            start = time.perf_counter()
-            baseline_tick(model, data, control_input.q, control_input.v, P, c, C, d)
-            base.append(time.perf_counter() - start)
-        base50, base99 = percentiles(base[10:])
-        for controller_name in ("tracking", "momentum", "prioritized"):
-            controller = create_controller(controller_name, robot, {})
-            times = []
-            ticks = (
-                inputs if controller_name != "prioritized" else inputs[: max(20, args.ticks // 5)]
-            )
-            for control_input in ticks:
-                start = time.perf_counter()
-                controller.compute(control_input)
-                times.append(time.perf_counter() - start)
-            p50, p99 = percentiles(times[10:])
-            ratios = f"{p50 / base50:>10.1f}x{p99 / base99:>10.1f}x"
+        state_sets = {"random": random_inputs}
+        if name == "thesis_humanoid" and RECORDED_STATES.exists():
+            state_sets["recorded"] = [
+                control_input_from_state(robot, entry.message, want_diagnostics=False)
+                for entry in read_log(RECORDED_STATES)
+                if isinstance(entry.message, State)
+            ]
+        floor = Floor(robot.model, rng)
+        runs = [
+            (controller, label)
+            for controller in CONTROLLERS
+            for label in state_sets
+            if label == "random" or controller == "momentum"
+        ]
+        controllers = {
+            run: create_controller(run[0], robot, {"optimizer_period_ticks": 1})
+            if run[0] != "prioritized"
+            else create_controller(run[0], robot, {})
+            for run in runs
+        }
+        floor_times: list[float] = []
+        times: dict[tuple[str, str], list[float]] = {run: [] for run in runs}
+        for chunk in range(args.chunks):
+            part = slice(chunk * args.ticks // args.chunks, (chunk + 1) * args.ticks // args.chunks)
+            floor_times += timed(floor.tick, random_inputs[part])
+            for run, controller in controllers.items():
+                inputs = state_sets[run[1]]
+                inputs = inputs[
+                    chunk * len(inputs) // args.chunks : (chunk + 1) * len(inputs) // args.chunks
+                ]
+                times[run] += timed(controller.compute, inputs)
+        floor50 = float(np.percentile(floor_times[5:], 50))
+        floor99 = float(np.percentile(floor_times[5:], 99))
+        for (controller, label), samples in times.items():
+            p50, p99 = np.percentile(samples[5:], [50, 99])
+            if controller == "momentum":
+                goal = f"≤ {MOMENTUM_GOAL_RATIO:.0f}x floor: " + (
+                    "met" if p50 / floor50 <= MOMENTUM_GOAL_RATIO else "not met"
+                )
+            elif controller == "prioritized":
+                goal = "p50 ≤ 1 ms: " + ("met" if p50 <= PRIORITIZED_GOAL_S else "not met")
+            else:
+                goal = ""
             print(
-                f"{name:<19}{model.nv:>4}{controller_name:>12}{p50 * 1e6:>9.0f}{p99 * 1e6:>9.0f}"
-                f"{base50 * 1e6:>10.0f}{base99 * 1e6:>10.0f}{ratios}"
+                f"{name:<19}{robot.model.nv:>4}{controller:>13}{label:>10}{p50 * 1e6:>9.0f}"
+                f"{p99 * 1e6:>9.0f}{floor50 * 1e6:>11.0f}{p50 / floor50:>10.1f}x"
+                f"{p99 / floor99:>10.1f}x  {goal}"
             )
 
 

@@ -24,6 +24,7 @@ q_joints]``, ``v = [v_base_in_base, ω_base_in_base, v_joints]``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 import pinocchio as pin
@@ -154,6 +155,14 @@ def _points_on_frame(
     )
 
 
+@cache
+def _strictly_lower(size: int) -> np.ndarray:
+    """``(size, size)`` mask of the entries below the diagonal (read only)."""
+    mask = np.tri(size, k=-1, dtype=bool)
+    mask.setflags(write=False)
+    return mask
+
+
 def compute_dynamics_terms(
     robot: RobotModel, data: pin.Data, q: np.ndarray, v: np.ndarray
 ) -> DynamicsTerms:
@@ -170,9 +179,8 @@ def compute_dynamics_terms(
     """
     model = robot.model
     pin.computeAllTerms(model, data, q, v)
-    # Pinocchio fills the upper triangle of M; mirror it.
-    upper = np.triu(data.M)
-    mass_matrix = upper + np.triu(upper, 1).T
+    # Pinocchio fills the upper triangle of M; mirror it (mask cached per size).
+    mass_matrix = np.where(_strictly_lower(model.nv), data.M.T, data.M)
     bias_forces = data.nle.copy()
     position_com = data.com[0].copy()
     total_mass = float(data.mass[0])

@@ -25,10 +25,17 @@ def wrench_map(offsets: np.ndarray) -> np.ndarray:
     about the origin; by duality the points' velocity Jacobian is ``Wᵀ`` times
     the origin's ``[v; ω]`` Jacobian.
     """
-    x, y, z = np.asarray(offsets, dtype=float).reshape(-1, 3).T
-    matrix = np.zeros((6, 3 * len(x)))
-    matrix[0, 0::3] = matrix[1, 1::3] = matrix[2, 2::3] = 1.0
-    matrix[3, 1::3], matrix[3, 2::3] = -z, y
-    matrix[4, 0::3], matrix[4, 2::3] = z, -x
-    matrix[5, 0::3], matrix[5, 1::3] = -y, x
-    return matrix
+    r = np.asarray(offsets, dtype=float).reshape(-1, 3)
+    count = len(r)
+    matrix = np.empty((6, count, 3))
+    matrix[:3] = _IDENTITY_ROWS  # [I … I]
+    # [r]×_ab = −ε_abc r_c
+    np.einsum("abc,ic->aib", _NEGATIVE_LEVI_CIVITA, r, out=matrix[3:])
+    return matrix.reshape(6, 3 * count)
+
+
+_IDENTITY_ROWS = np.eye(3)[:, None, :]
+"""``(3, 1, 3)``: row ``a`` of the identity, broadcast over the points."""
+_NEGATIVE_LEVI_CIVITA = np.zeros((3, 3, 3))
+for _a, _b, _c in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+    _NEGATIVE_LEVI_CIVITA[_a, _b, _c], _NEGATIVE_LEVI_CIVITA[_a, _c, _b] = -1.0, 1.0

@@ -235,6 +235,7 @@ class MomentumController(Controller):
         self._last_flags: tuple[bool, ...] | None = None
         self._last_wrenches: np.ndarray | None = None
         self._last_optimizer: dict[str, Any] = {}
+        self._tracking_weight: np.ndarray | None = None  # from the parameters, when first needed
         super().__init__(robot, params)
 
     # Parameters -----------------------------------------------------------------
@@ -269,6 +270,7 @@ class MomentumController(Controller):
         if "clip" in rest and isinstance(rest["clip"], str):
             clip = load_motion_clip(rest["clip"], self.robot) if rest["clip"] else None
         super().set_params(rest)
+        self._tracking_weight = None
         self._clip = clip
         for name, target in validated_points.items():
             if target is None:
@@ -461,15 +463,18 @@ class MomentumController(Controller):
             p["joint_limit_damping"],
             errors,
         )
-        weight = np.concatenate(
-            [
-                np.zeros(3),
-                np.full(3, p["weight_root_orientation"]),
-                p["weight_tracking"] * np.asarray(p["joint_weights"]),
-            ]
-        )
+        if self._tracking_weight is None:  # reset by set_params
+            self._tracking_weight = np.concatenate(
+                [
+                    np.zeros(3),
+                    np.full(3, p["weight_root_orientation"]),
+                    p["weight_tracking"] * np.asarray(p["joint_weights"]),
+                ]
+            )
         objectives = [
-            compute_tracking_objective(model, q, v, q_ref, v_ref, a_ref, stiffness, damping, weight)
+            compute_tracking_objective(
+                model, q, v, q_ref, v_ref, a_ref, stiffness, damping, self._tracking_weight
+            )
         ]
 
         momentum, mass = terms.momentum, terms.total_mass
@@ -540,7 +545,6 @@ class MomentumController(Controller):
         self._last_flags = flags
         self._last_optimizer = {
             "objectives": objectives,
-            "objective_residuals": {o.name: o.residual(solution.x) for o in objectives},
             "linear_momentum_rate_desired": desired_rate,
             "angular_momentum_weight": angular_weight,
             "angular_momentum_rate_desired": (
@@ -583,11 +587,7 @@ class MomentumController(Controller):
             "centroidal_moment_pivot": cmp_,
             "supports": list(flags),
             "support_polygon_xy": polygon.reshape(-1),
-            "objective_residuals": (
-                self._last_optimizer["objective_residuals"]
-                if np.array_equal(acceleration, solution.x)  # realized as optimized
-                else {o.name: o.residual(acceleration) for o in objectives}
-            ),
+            "objective_residuals": {o.name: o.residual(acceleration) for o in objectives},
             "constraint_residual": solution.constraint_residual,
             "root_wrench_residual": dynamics.root_wrench_residual,
             "saturated_joints": dynamics.saturated_joints,

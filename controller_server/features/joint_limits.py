@@ -334,6 +334,7 @@ def soft_limit_gains(
         ``(stiffness_per_dof, damping_per_dof)``, each ``(nv,)``.
     """
     e = np.asarray(errors, dtype=float)
-    stiffness_per_dof = np.broadcast_to(stiffness + np.multiply(limit_stiffness, e), e.shape)
-    damping_per_dof = np.broadcast_to(damping + np.multiply(limit_damping, e), e.shape)
-    return stiffness_per_dof.astype(float), damping_per_dof.astype(float)
+    stiffness_per_dof, damping_per_dof = np.empty(e.shape), np.empty(e.shape)
+    stiffness_per_dof[...] = stiffness + np.multiply(limit_stiffness, e)
+    damping_per_dof[...] = damping + np.multiply(limit_damping, e)
+    return stiffness_per_dof, damping_per_dof
