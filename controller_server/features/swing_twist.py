@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from controller_server.spatial import cross
+
 __all__ = ["SwingCone", "compose", "cones_contain_units", "rotate", "swing_twist", "twist_angle"]
 
 _TINY = 1e-12
@@ -44,6 +46,14 @@ def _perpendicular(axis: np.ndarray) -> np.ndarray:
     return perpendicular / np.linalg.norm(perpendicular)
 
 
+def _quaternion(vector: np.ndarray, scalar: float) -> np.ndarray:
+    """``[x, y, z, w]`` from a vector part and a scalar part."""
+    quaternion = np.empty(4)
+    quaternion[:3] = vector
+    quaternion[3] = scalar
+    return quaternion
+
+
 def compose(first_xyzw: np.ndarray, second_xyzw: np.ndarray) -> np.ndarray:
     """Hamilton product ``first ⊗ second``: rotate by ``second``, then by ``first``.
 
@@ -56,15 +66,15 @@ def compose(first_xyzw: np.ndarray, second_xyzw: np.ndarray) -> np.ndarray:
     """
     v1, w1 = np.asarray(first_xyzw, dtype=float)[:3], float(first_xyzw[3])
     v2, w2 = np.asarray(second_xyzw, dtype=float)[:3], float(second_xyzw[3])
-    return np.append(w1 * v2 + w2 * v1 + np.cross(v1, v2), w1 * w2 - float(v1 @ v2))
+    return _quaternion(w1 * v2 + w2 * v1 + cross(v1, v2), w1 * w2 - float(v1 @ v2))
 
 
 def rotate(quaternion_xyzw: np.ndarray, vector: np.ndarray) -> np.ndarray:
     """``q v q⁻¹``: ``vector`` rotated by the (normalised) quaternion."""
     q = _unit(quaternion_xyzw, 4, "quaternion_xyzw")
     v = np.asarray(vector, dtype=float)
-    doubled_cross = 2.0 * np.cross(q[:3], v)
-    return v + q[3] * doubled_cross + np.cross(q[:3], doubled_cross)
+    doubled_cross = 2.0 * cross(q[:3], v)
+    return v + q[3] * doubled_cross + cross(q[:3], doubled_cross)
 
 
 def swing_twist(quaternion_xyzw: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -95,8 +105,8 @@ def swing_twist(quaternion_xyzw: np.ndarray, axis: np.ndarray) -> tuple[np.ndarr
     if norm < _DEGENERATE_SWING:
         sign = 1.0 if q[3] >= 0.0 else -1.0
         return sign * q, np.array([0.0, 0.0, 0.0, sign])
-    twist = np.append(along * a, q[3]) / norm
-    swing = compose(q, np.append(-twist[:3], twist[3]))
+    twist = _quaternion(along * a, q[3]) / norm
+    swing = compose(q, _quaternion(-twist[:3], twist[3]))
     return swing / np.linalg.norm(swing), twist
 
 
