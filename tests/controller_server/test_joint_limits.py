@@ -370,11 +370,14 @@ def test_the_vectorized_screen_agrees_with_each_joints_own_error(name):
     limit_set = JointLimitSet(limits, robot.model.nv)
     rng = np.random.default_rng(7)
     outside = 0
-    for _ in range(300):  # random configurations, many of them past some limit
-        q = pin.randomConfiguration(
-            robot.model, -np.full(robot.model.nq, 2.5), np.full(robot.model.nq, 2.5)
-        )
-        q[3:7] = [0.0, 0.0, 0.0, 1.0]
+    for _ in range(300):  # random configurations (seeded), many of them past some limit
+        q = pin.neutral(robot.model)
+        for limit in limits:
+            if isinstance(limit, BallJointLimit):
+                quaternion = rng.normal(size=4)
+                q[limit.idx_q : limit.idx_q + 4] = quaternion / np.linalg.norm(quaternion)
+            else:
+                q[limit.idx_q] = rng.uniform(-2.5, 2.5)
         expected = np.zeros(robot.model.nv)
         for limit in limits:
             expected[limit.idx_v : limit.idx_v + limit.nv] = limit.error(q)
