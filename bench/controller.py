@@ -26,22 +26,22 @@ from controller_server.blas import default_to_single_threaded_blas
 
 default_to_single_threaded_blas()  # before numpy: see controller_server/blas.py
 
-import argparse  # noqa: E402
-import ctypes  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import ctypes
+import time
+from pathlib import Path
 
-import daqp  # noqa: E402
-import numpy as np  # noqa: E402
-import pinocchio as pin  # noqa: E402
+import daqp
+import numpy as np
+import pinocchio as pin
 
-from clients.sampling import random_state  # noqa: E402
-from controller_server.controllers import create_controller  # noqa: E402
-from controller_server.models import BUILTIN_MODELS, load_robot_model  # noqa: E402
-from controller_server.session import Session  # noqa: E402
-from controller_server.wire import control_input_from_state  # noqa: E402
-from protocol.messages import Hello, State  # noqa: E402
-from protocol.recording import read_log  # noqa: E402
+from clients.sampling import random_state
+from controller_server.controllers import create_controller
+from controller_server.models import BUILTIN_MODELS, load_robot_model
+from controller_server.session import Session
+from controller_server.wire import control_input_from_state
+from protocol.messages import Hello, State
+from protocol.recording import read_log
 
 CONTROLLERS = ("tracking", "momentum", "prioritized")
 RECORDED_STATES = Path(__file__).parent.parent / "tests" / "fixtures" / "replay_momentum_push.mcap"

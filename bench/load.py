@@ -15,6 +15,10 @@ Usage: python bench/load.py [--seconds 10]
 
 from __future__ import annotations
 
+from controller_server.blas import default_to_single_threaded_blas
+
+default_to_single_threaded_blas()  # before numpy: see controller_server/blas.py
+
 import argparse
 import multiprocessing
 import os

@@ -17,6 +17,10 @@ Usage: python bench/record.py [--blocks 10] [--block-ticks 500]
 
 from __future__ import annotations
 
+from controller_server.blas import default_to_single_threaded_blas
+
+default_to_single_threaded_blas()  # before numpy: see controller_server/blas.py
+
 import argparse
 import tempfile
 import time

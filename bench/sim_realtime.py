@@ -21,14 +21,14 @@ from controller_server.blas import default_to_single_threaded_blas
 
 default_to_single_threaded_blas()  # before numpy: see controller_server/blas.py
 
-import argparse  # noqa: E402
-import time  # noqa: E402
+import argparse
+import time
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from clients.server_process import ServerProcess  # noqa: E402
-from clients.sim.runner import make_backend, run_scenario, standing_state  # noqa: E402
-from clients.sim.scenario import Scenario, load_scenario  # noqa: E402
+from clients.server_process import ServerProcess
+from clients.sim.runner import make_backend, run_scenario, standing_state
+from clients.sim.scenario import Scenario, load_scenario
 
 
 def physics_alone_rtf(scenario, welcome, seconds: float) -> float:
