@@ -53,6 +53,8 @@ def feasible_inequalities(rng, n: int, rows: int, margin: float) -> tuple[np.nda
 
 def test_public_names():
     assert set(prioritized.__all__) == {
+        "GRAM_CONDITION_LIMIT",
+        "Level",
         "QP_ITERATION_LIMITS",
         "QP_TIME_BUDGET_S",
         "LevelReport",

@@ -43,8 +43,8 @@ by default (de Lasa's ``k_v = 2 √k_p``).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from typing import Any, ClassVar
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -66,9 +66,9 @@ from controller_server.controllers.base import (
 )
 from controller_server.controllers.prioritized_layout import (
     NUM_ROOT_DOFS,
+    LayoutIndex,
     PrioritizedLayout,
     friction_cone_basis,
-    joint_limit_rows,
 )
 from controller_server.dynamics import DynamicsTerms, compute_dynamics_terms
 from controller_server.features import (
@@ -86,7 +86,7 @@ from controller_server.features.setpoint import (
 )
 from controller_server.inverse_dynamics import wrenches_from_point_forces
 from controller_server.models import RobotModel
-from controller_server.solvers.prioritized import PrioritizedSolution, solve_prioritized
+from controller_server.solvers.prioritized import Level, PrioritizedSolution, solve_prioritized
 
 __all__ = ["OBJECTIVES", "PrioritizedController", "friction_cone_basis"]
 
@@ -96,6 +96,14 @@ TARGET_HANDOVER_S = 0.05
 eq. 7 amplifies what is left of a velocity error as T → 0."""
 EXACT_GAIN_BOUND = 1e15
 """Gain bound of the equations of motion: only directions at the rounding floor are singular."""
+
+
+class _Term(NamedTuple):
+    """An objective over one block of ``x = [τ, q̈, λ]`` (its ``A`` has the block's columns)."""
+
+    objective: Objective
+    columns: slice
+
 
 OBJECTIVES: dict[str, tuple[int, float, str]] = {
     "contact": (1, 1.0, "sole points toward the ground (Table 1)"),
@@ -246,6 +254,8 @@ class PrioritizedController(Controller):
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self._data = robot.model.createData()
+        self._index = LayoutIndex(robot)
+        self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._height_change_start_s: float | None = None  # state time a new height was set
         self._pending_height_change = False
         super().__init__(robot, params)
@@ -297,12 +307,12 @@ class PrioritizedController(Controller):
             raise ControllerFailed(f"a linear solve failed at this state: {error}") from error
 
     def _compute(self, control_input: ControlInput) -> ControlOutput:
-        p, robot = self._params, self.robot
-        terms = compute_dynamics_terms(robot, self._data, control_input.q, control_input.v)
+        p = self._params
+        terms = compute_dynamics_terms(self.robot, self._data, control_input.q, control_input.v)
         check_finite_dynamics(terms)
         flags = self.supports(control_input)
         layout = PrioritizedLayout(
-            robot,
+            self._index,
             terms,
             [allowed > 0.5 for allowed in p["support_mask"]],
             flags,
@@ -311,33 +321,33 @@ class PrioritizedController(Controller):
             p["contact_distance"],
         )
         objectives, desired_rates = self._objectives(control_input, terms, layout)
-        levels: dict[int, list[Objective]] = {}
-        for name, objective in objectives.items():
-            if name not in ("dynamics", "forces") and np.any(objective.weight > 0):
-                levels.setdefault(p[f"priority_{name}"], []).append(objective)
-        ordered = [
-            _normalized(level)
-            for level in (
-                [objectives["dynamics"]],
-                *(levels[k] for k in sorted(levels)),
-                [objectives["forces"]],
-            )
-        ]
-        D, f = self._inequalities(control_input, terms, layout)
-        not_finite = [
-            name
-            for name, objective in objectives.items()
-            if not (np.isfinite(objective.A).all() and np.isfinite(objective.b).all())
-        ] + ([] if np.isfinite(D).all() and np.isfinite(f).all() else ["inequalities"])
-        if not_finite:  # velocities so large that the objectives overflow
+        D, f = layout.inequalities(control_input.q, p["non_penetration"])
+        arrays = [a for term in objectives.values() for a in (term.objective.A, term.objective.b)]
+        if not all(np.isfinite(a).all() for a in (*arrays, D, f)):
+            not_finite = [
+                name
+                for name, (objective, _) in objectives.items()
+                if not (np.isfinite(objective.A).all() and np.isfinite(objective.b).all())
+            ] + ([] if np.isfinite(D).all() and np.isfinite(f).all() else ["inequalities"])
+            # Velocities so large that the objectives overflow.
             raise ControllerFailed(
                 f"non-finite {', '.join(not_finite)} at this state (the dynamics overflow); "
                 "no command"
             )
+        grouped: dict[int, list[_Term]] = {}
+        for name, term in objectives.items():
+            if name not in ("dynamics", "forces") and np.any(term.objective.weight > 0):
+                grouped.setdefault(p[f"priority_{name}"], []).append(term)
+        # The equations of motion have full row rank (M ≻ 0) and a small condition number.
+        levels = [
+            _normalized_level([objectives["dynamics"]], layout.size, well_conditioned=True),
+            *(_normalized_level(grouped[k], layout.size) for k in sorted(grouped)),
+            _normalized_level([objectives["forces"]], layout.size),
+        ]
         # The equations of motion are kept exactly (rounding floor only): a gain bound there
         # would let lower levels bend the dynamics of a heavy robot.
-        bounds = [EXACT_GAIN_BOUND] + [p["gain_bound"]] * (len(ordered) - 1)
-        solution = solve_prioritized(ordered, D, f, gain_bound=bounds, qp_solver=p["qp_solver"])
+        bounds = [EXACT_GAIN_BOUND] + [p["gain_bound"]] * (len(levels) - 1)
+        solution = solve_prioritized(levels, D, f, gain_bound=bounds, qp_solver=p["qp_solver"])
         top = solution.levels[0]
         if top.status != "solved":
             raise ControllerFailed(
@@ -348,11 +358,11 @@ class PrioritizedController(Controller):
 
     def _objectives(
         self, control_input: ControlInput, terms: DynamicsTerms, layout: PrioritizedLayout
-    ) -> tuple[dict[str, Objective], dict[str, np.ndarray]]:
-        """The objectives by name, and the desired momentum rates (for the diagnostics).
+    ) -> tuple[dict[str, _Term], dict[str, np.ndarray]]:
+        """The objectives by name, each over its block of ``x``, and the desired momentum rates.
 
-        Every objective on ``q̈`` comes from the feature library
-        (:mod:`controller_server.features`), written over ``x`` by the layout.
+        The rates are for the diagnostics. Every objective on ``q̈`` comes from the feature library
+        (:mod:`controller_server.features`), over the layout's ``q̈`` block.
         """
         p, model = self._params, self.robot.model
         q, v = control_input.q, control_input.v
@@ -398,7 +408,7 @@ class PrioritizedController(Controller):
                 com,
                 shrink_polygon(layout.support_polygon, p["cop_margin"]),
                 p["ground_height"],
-                float(np.linalg.norm(model.gravity.linear)),
+                self._gravity,
                 friction_coefficient=layout.smallest_friction_coefficient,
             )
             desired_linear_rate[2] = mass * self._height_acceleration(
@@ -439,11 +449,15 @@ class PrioritizedController(Controller):
             p["weight_pose"],
         )
         on_acceleration += [pose, trunk]
+        everything = slice(0, layout.size)
         objectives = {
-            "dynamics": layout.equations_of_motion(terms),
-            **{o.name: layout.over_acceleration(o) for o in on_acceleration},
-            "forces": layout.least_forces(),
-            "torque": layout.least_torque(np.asarray(p["torque_selection"]), p["weight_torque"]),
+            "dynamics": _Term(layout.equations_of_motion(terms), everything),
+            **{o.name: _Term(o, layout.acceleration) for o in on_acceleration},
+            "forces": _Term(layout.least_forces(), layout.force),
+            "torque": _Term(
+                layout.least_torque(np.asarray(p["torque_selection"]), p["weight_torque"]),
+                layout.torque,
+            ),
         }
         desired_rates = {
             "linear_momentum_rate": desired_linear_rate,
@@ -476,58 +490,25 @@ class PrioritizedController(Controller):
             )
         )
 
-    def _inequalities(
-        self, control_input: ControlInput, terms: DynamicsTerms, layout: PrioritizedLayout
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Rows of ``D x + f ≥ 0``: λ ≥ 0, non-penetration, torque and joint limits."""
-        n, nu, nl = layout.size, layout.nu, layout.nl
-        blocks: list[tuple[np.ndarray, np.ndarray]] = []
-        # λ ≥ 0 (eq. 25).
-        if nl:
-            blocks.append((layout.force_selection, np.zeros(nl)))
-        if nl and self._params["non_penetration"]:
-            # Vᵀ (J_c q̈ + J̇_c q̇) ≥ 0 (eq. 26).
-            blocks.append(
-                (
-                    np.hstack([np.zeros((nl, nu)), layout.cone_jacobian, np.zeros((nl, nl))]),
-                    layout.cone_drift,
-                )
-            )
-        # −τ_max ≤ τ ≤ τ_max (§7.2).
-        limit = self.robot.torque_limit
-        bounded = np.flatnonzero(np.isfinite(limit))
-        if bounded.size:
-            rows = np.zeros((bounded.size, n))
-            rows[np.arange(bounded.size), bounded] = 1.0
-            blocks += [(-rows, limit[bounded]), (rows, limit[bounded])]
-        rows, offsets = joint_limit_rows(self.robot, control_input.q, n, nu)
-        if len(offsets):
-            blocks.append((rows, offsets))
-        if not blocks:
-            return np.zeros((0, n)), np.zeros(0)
-        return np.vstack([b[0] for b in blocks]), np.concatenate([b[1] for b in blocks])
-
     def _output(
         self,
         terms: DynamicsTerms,
         layout: PrioritizedLayout,
         flags: tuple[bool, ...],
-        objectives: dict[str, Objective],
+        objectives: dict[str, _Term],
         desired_rates: dict[str, np.ndarray],
         solution: PrioritizedSolution,
     ) -> ControlOutput:
         p, robot = self._params, self.robot
         x = solution.x
-        torque_unclipped = x[: layout.nu]
+        torque_unclipped = x[layout.torque]
         torque = np.clip(torque_unclipped, -robot.torque_limit, robot.torque_limit)
         forces = np.zeros((robot.num_contact_points, 3))
-        forces[layout.force_point_indices] = (layout.cone @ x[layout.nu + layout.nv :]).reshape(
-            -1, 3
-        )
-        counts = [len(c.points_in_frame) for c in robot.contacts]
-        wrenches = wrenches_from_point_forces(terms, forces, counts)
+        forces[layout.force_point_indices] = layout.point_forces(x)
+        wrenches = wrenches_from_point_forces(terms, forces, self._index.counts)
         # The acceleration τ and f really produce (equal to x's q̈ when eq. 22 holds).
-        generalized = layout.S_T @ torque + layout.contact_force_map @ x[layout.nu + layout.nv :]
+        generalized = layout.contact_force_map @ x[layout.force]
+        generalized[NUM_ROOT_DOFS:] += torque
         acceleration = np.linalg.solve(terms.mass_matrix, generalized - terms.bias_forces)
         momentum = terms.momentum
         cop, cmp_ = ground_reference_points(
@@ -539,6 +520,7 @@ class PrioritizedController(Controller):
         )
         support = compute_support_equalities(terms, flags)
         constraint_residual = float(np.linalg.norm(support.C @ acceleration - support.d))
+        dynamics = objectives["dynamics"].objective
         diagnostics = {
             "position_com_in_world": terms.position_com_in_world,
             "velocity_com_in_world": momentum.linear_momentum / terms.total_mass,
@@ -552,12 +534,13 @@ class PrioritizedController(Controller):
             "centroidal_moment_pivot": cmp_,
             "supports": list(flags),
             "support_polygon_xy": layout.support_polygon.reshape(-1),
-            "objective_residuals": {name: o.residual(x) for name, o in objectives.items()},
+            "objective_residuals": {
+                name: objective.residual(x[columns])
+                for name, (objective, columns) in objectives.items()
+            },
             "constraint_residual": constraint_residual,
             "root_wrench_residual": float(
-                np.linalg.norm(
-                    (objectives["dynamics"].A @ x - objectives["dynamics"].b)[:NUM_ROOT_DOFS]
-                )
+                np.linalg.norm(dynamics.A[:NUM_ROOT_DOFS] @ x - dynamics.b[:NUM_ROOT_DOFS])
             ),
             "saturated_joints": int(
                 np.count_nonzero(np.abs(torque_unclipped) >= robot.torque_limit * (1 - 1e-6))
@@ -587,15 +570,25 @@ class PrioritizedController(Controller):
         )
 
 
-def _normalized(level: list[Objective]) -> list[Objective]:
-    """The level scaled to unit Frobenius norm ``‖W^½ A‖_F = 1`` (same minimizers).
+def _normalized_level(terms: Sequence[_Term], size: int, well_conditioned: bool = False) -> Level:
+    """The level's rows ``√w A`` over ``x`` scaled to ``‖W^½ A‖_F = 1`` (de Lasa 2010, eq. 16, 37).
 
-    The levels come in their own units (N for the equations of motion, m/s²
+    Same minimizers. The levels come in their own units (N for the equations of motion, m/s²
     for features, kg·m²/s² per kg for momentum); scaled alike, one gain bound
     ``B`` is a bound on each level's condition (σ < σ_max / B, within
     ``√rank``, is singular) rather than on singular values in mixed units.
     """
-    scale = math.sqrt(sum(float(np.sum(o.weight[:, None] * o.A**2)) for o in level))
-    if not scale > 0.0:
-        return level
-    return [Objective(o.name, o.A, o.b, o.weight / scale**2) for o in level]
+    objectives = [term.objective for term in terms]
+    scale = math.sqrt(sum(float(o.weight @ np.einsum("ij,ij->i", o.A, o.A)) for o in objectives))
+    rows = sum(o.b.size for o in objectives)
+    A = np.zeros((rows, size))
+    b = np.empty(rows)
+    start = 0
+    for objective, columns in terms:
+        weight = objective.weight / scale**2 if scale > 0.0 else objective.weight
+        root_weight = np.sqrt(weight)
+        end = start + objective.b.size
+        A[start:end, columns] = root_weight[:, None] * objective.A
+        b[start:end] = root_weight * objective.b
+        start = end
+    return Level(tuple(o.name for o in objectives), A, b, well_conditioned)

@@ -2,15 +2,19 @@
 
 de Lasa et al. 2010, eq. 1 and §5: ``x = [τ, q̈, λ]``, the contact force of
 every loaded sole point in the basis of its linearized friction cone
-(``f = V λ``, eq. 23). :class:`PrioritizedLayout` writes a feature's rows on
-``q̈`` over ``x`` and adds the rows that belong to ``x`` itself: the equations
-of motion (eq. 22–24), the smallest forces and the smallest torques (eq. 15).
+(``f = V λ``, eq. 23). :class:`PrioritizedLayout` gives the blocks of ``x``
+and the contact maps of one tick; the rows that belong to ``x`` itself are
+the equations of motion (eq. 22–24), the smallest forces and the smallest
+torques (eq. 15). What does not change between ticks (index arrays, ``Sᵀ``,
+the joint-limit table, the friction pyramids) is computed once per robot by
+:class:`LayoutIndex`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from functools import cache
 
 import numpy as np
 
@@ -19,7 +23,13 @@ from controller_server.dynamics import DynamicsTerms
 from controller_server.features import Objective
 from controller_server.models import RobotModel
 
-__all__ = ["NUM_ROOT_DOFS", "PrioritizedLayout", "friction_cone_basis", "joint_limit_rows"]
+__all__ = [
+    "NUM_ROOT_DOFS",
+    "LayoutIndex",
+    "PrioritizedLayout",
+    "friction_cone_basis",
+    "joint_limit_rows",
+]
 
 NUM_ROOT_DOFS = 6
 
@@ -34,6 +44,53 @@ def friction_cone_basis(friction_coefficient: float) -> np.ndarray:
     mu = friction_coefficient / math.sqrt(2.0)
     edges = np.array([[mu, mu, 1.0], [mu, -mu, 1.0], [-mu, mu, 1.0], [-mu, -mu, 1.0]]).T
     return edges / np.linalg.norm(edges, axis=0)
+
+
+@cache
+def _cone_basis(friction_coefficient: float) -> np.ndarray:
+    """:func:`friction_cone_basis`, computed once per coefficient (read-only)."""
+    basis = friction_cone_basis(friction_coefficient)
+    basis.flags.writeable = False
+    return basis
+
+
+class LayoutIndex:
+    """What the layout needs of a robot that no state changes, computed once.
+
+    Attributes:
+        nv: Generalized velocities.
+        nu: Actuated joint DoFs, ``nv − 6``.
+        owner: ``(points,)`` contact index of every contact point.
+        counts: Points per contact.
+        S_T: ``(nv, nu)``: Sᵀ, actuated torques into generalized forces.
+        torque_limit: ``(nu,)`` torque limits (N·m; ``inf`` where unbounded).
+        bounded_torques: Indices of the finite torque limits.
+    """
+
+    def __init__(self, robot: RobotModel):
+        model = robot.model
+        self.nv = model.nv
+        self.nu = self.nv - NUM_ROOT_DOFS
+        self.counts = tuple(len(c.points_in_frame) for c in robot.contacts)
+        self.owner = np.repeat(np.arange(len(self.counts)), self.counts)
+        self.S_T = np.vstack([np.zeros((NUM_ROOT_DOFS, self.nu)), np.eye(self.nu)])
+        self.torque_limit = np.asarray(robot.torque_limit, dtype=float)
+        self.bounded_torques = np.flatnonzero(np.isfinite(self.torque_limit))
+        scalar = [joint for joint in model.joints[2:] if joint.nq == 1]
+        self._limit_q = np.array([joint.idx_q for joint in scalar], dtype=int)
+        self._limit_v = np.array([joint.idx_v for joint in scalar], dtype=int)
+        self._lower = np.asarray(model.lowerPositionLimit)[self._limit_q]
+        self._upper = np.asarray(model.upperPositionLimit)[self._limit_q]
+
+    def joint_limit_signs(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity indices of the 1-DoF joints at or past a limit, and ``+1`` (lower) or ``−1``.
+
+        In joint order; see :func:`joint_limit_rows`.
+        """
+        values = q[self._limit_q]
+        sign = np.where(values <= self._lower, 1.0, np.where(values >= self._upper, -1.0, 0.0))
+        at_limit = np.flatnonzero(sign)
+        return self._limit_v[at_limit], sign[at_limit]
 
 
 class PrioritizedLayout:
@@ -57,7 +114,7 @@ class PrioritizedLayout:
 
     def __init__(
         self,
-        robot: RobotModel,
+        index: LayoutIndex,
         terms: DynamicsTerms,
         planted: Sequence[bool],
         supports: Sequence[bool],
@@ -65,25 +122,22 @@ class PrioritizedLayout:
         ground_height: float,
         contact_distance: float,
     ):
-        nv = robot.model.nv
-        self.nv, self.nu = nv, nv - NUM_ROOT_DOFS
-        owner = np.repeat(
-            np.arange(len(robot.contacts)), [len(c.points_in_frame) for c in robot.contacts]
-        )
+        nv = index.nv
+        self.index = index
+        self.nv, self.nu = nv, index.nu
+        owner = index.owner
         positions = np.vstack(terms.position_points_in_world)
-        jacobian = np.vstack(terms.point_jacobians)
-        drift = np.concatenate(terms.point_drifts)
+        count = len(positions)
+        jacobian = np.vstack(terms.point_jacobians).reshape(count, 3, nv)
+        drift = np.concatenate(terms.point_drifts).reshape(count, 3)
         mus = np.asarray(friction_coefficients, dtype=float)[owner]
 
-        def rows(points: np.ndarray) -> np.ndarray:
-            return (3 * points[:, None] + np.arange(3)).reshape(-1)
-
-        planted_points = np.flatnonzero(np.asarray(planted)[owner])
+        planted_points = np.flatnonzero(np.asarray(planted, dtype=bool)[owner])
         #: Planted points: ``(3s, nv)`` Jacobian, ``(3s,)`` drift, ``(s, 3)`` positions.
-        self.point_jacobian = jacobian[rows(planted_points)]
-        self.point_drift = drift[rows(planted_points)]
+        self.point_jacobian = jacobian[planted_points].reshape(-1, nv)
+        self.point_drift = drift[planted_points].reshape(-1)
         self.point_positions = positions[planted_points]
-        supporting = np.flatnonzero(np.asarray(supports)[owner])
+        supporting = np.flatnonzero(np.asarray(supports, dtype=bool)[owner])
         #: Supporting points' positions ``(k, 3)``: the base of support.
         self.support_positions = positions[supporting]
         #: Their convex hull, counter-clockwise x–y vertices.
@@ -93,57 +147,86 @@ class PrioritizedLayout:
         loaded = planted_points[near]
         #: Indices (over all the robot's contact points) of the points carrying force.
         self.force_point_indices = loaded
-        force_jacobian = jacobian[rows(loaded)]
         self.nl = 4 * loaded.size
-        #: ``(3p, 4p)`` block-diagonal V: point forces from λ (eq. 23).
-        self.cone = np.zeros((3 * loaded.size, self.nl))
-        for i, point in enumerate(loaded):
-            self.cone[3 * i : 3 * i + 3, 4 * i : 4 * i + 4] = friction_cone_basis(mus[point])
-        #: ``(4p, nv)`` and ``(4p,)``: ``Vᵀ J_c`` and ``Vᵀ J̇_c q̇`` of eq. 26.
-        self.cone_jacobian = self.cone.T @ force_jacobian
-        self.cone_drift = self.cone.T @ drift[rows(loaded)]
+        #: ``(p, 3, 4)``: each loaded point's V, the block diagonal of eq. 23.
+        self.cones = (
+            np.stack([_cone_basis(float(mu)) for mu in mus[loaded]])
+            if loaded.size
+            else np.zeros((0, 3, 4))
+        )
+        cones_T = self.cones.transpose(0, 2, 1)
+        #: ``(4p, nv)`` and ``(4p,)``: ``Vᵀ J_c`` and ``Vᵀ J̇_c q̇`` of eq. 26, point by point.
+        self.cone_jacobian = np.matmul(cones_T, jacobian[loaded]).reshape(self.nl, nv)
+        self.cone_drift = np.matmul(cones_T, drift[loaded][:, :, None]).reshape(self.nl)
         #: ``(nv, nλ)``: J_cᵀ V, generalized force of λ (eq. 24).
-        self.contact_force_map = force_jacobian.T @ self.cone
+        self.contact_force_map = self.cone_jacobian.T
         #: ``(nv, nu)``: Sᵀ, actuated torques into generalized forces.
-        self.S_T = np.vstack([np.zeros((NUM_ROOT_DOFS, self.nu)), np.eye(self.nu)])
+        self.S_T = index.S_T
         self.size = self.nu + nv + self.nl
-        #: ``(nλ, size)``: the rows picking λ out of x.
-        self.force_selection = np.hstack([np.zeros((self.nl, self.nu + nv)), np.eye(self.nl)])
+        #: Blocks of ``x``.
+        self.torque = slice(0, self.nu)
+        self.acceleration = slice(self.nu, self.nu + nv)
+        self.force = slice(self.nu + nv, self.size)
 
-    def over_acceleration(self, objective: Objective) -> Objective:
-        """An objective on ``q̈`` (a feature's rows) written over ``x = [τ, q̈, λ]``."""
-        full = np.zeros((objective.A.shape[0], self.size))
-        full[:, self.nu : self.nu + self.nv] = objective.A
-        return Objective(objective.name, full, objective.b, objective.weight)
+    def point_forces(self, x: np.ndarray) -> np.ndarray:
+        """``(p, 3)``: the loaded points' forces ``f = V λ`` (eq. 23) from ``x``."""
+        lambdas = x[self.force].reshape(-1, 4, 1)
+        return np.matmul(self.cones, lambdas).reshape(-1, 3)
 
     def equations_of_motion(self, terms: DynamicsTerms) -> Objective:
         """``‖Sᵀ τ − M q̈ + J_cᵀ V λ − h‖²`` (eq. 22–24), every row weighted 1."""
-        return Objective(
-            "dynamics",
-            np.hstack([self.S_T, -terms.mass_matrix, self.contact_force_map]),
-            terms.bias_forces,
-            np.ones(self.nv),
-        )
+        A = np.empty((self.nv, self.size))
+        A[:, self.torque] = self.S_T
+        np.negative(terms.mass_matrix, out=A[:, self.acceleration])
+        A[:, self.force] = self.contact_force_map
+        return Objective("dynamics", A, terms.bias_forces, np.ones(self.nv))
 
     def least_forces(self) -> Objective:
-        """``‖λ‖²``: the contact forces the levels above leave free are the smallest.
+        """``‖λ‖²`` over the ``λ`` block: the smallest of the forces the levels above leave free.
 
         Below everything: the internal forces between two feet, which the
         levels above do not fix, as the weighted controller's distribution.
         """
-        return Objective("forces", self.force_selection, np.zeros(self.nl), np.ones(self.nl))
+        return Objective("forces", np.eye(self.nl), np.zeros(self.nl), np.ones(self.nl))
 
     def least_torque(self, selection: np.ndarray, weight: float) -> Objective:
-        """``Σ sᵢ τᵢ²`` on the joints of ``selection`` (eq. 15), weight α."""
-        rows = np.hstack(
-            [np.diag(np.sqrt(selection)), np.zeros((selection.size, self.size - selection.size))]
-        )
+        """``Σ sᵢ τᵢ²`` on the joints of ``selection`` (eq. 15), weight α, over the ``τ`` block."""
         return Objective(
             "torque",
-            rows,
+            np.diag(np.sqrt(selection)),
             np.zeros(selection.size),
             np.full(selection.size, weight) * (selection > 0),
         )
+
+    def inequalities(self, q: np.ndarray, non_penetration: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Rows of ``D x + f ≥ 0``: λ ≥ 0, non-penetration, torque and joint limits.
+
+        In this order: ``λ ≥ 0`` (eq. 25); ``Vᵀ (J_c q̈ + J̇_c q̇) ≥ 0`` (eq. 26);
+        ``−τ_max ≤ τ ≤ τ_max`` (§7.2) on the bounded joints, lower then upper; the joints
+        at a limit (eq. 27, :func:`joint_limit_rows`).
+        """
+        index, nu, nl = self.index, self.nu, self.nl
+        bounded = index.bounded_torques
+        limit_v, limit_sign = index.joint_limit_signs(q)
+        penetration = nl if nl and non_penetration else 0
+        rows = nl + penetration + 2 * bounded.size + limit_v.size
+        D = np.zeros((rows, self.size))
+        f = np.zeros(rows)
+        if nl:
+            D[np.arange(nl), self.force.start + np.arange(nl)] = 1.0
+        if penetration:
+            D[nl : 2 * nl, self.acceleration] = self.cone_jacobian
+            f[nl : 2 * nl] = self.cone_drift
+        start = nl + penetration
+        if bounded.size:
+            count = bounded.size
+            D[start + np.arange(count), bounded] = -1.0
+            D[start + count + np.arange(count), bounded] = 1.0
+            f[start : start + count] = index.torque_limit[bounded]
+            f[start + count : start + 2 * count] = index.torque_limit[bounded]
+            start += 2 * count
+        D[start + np.arange(limit_v.size), nu + limit_v] = limit_sign
+        return D, f
 
 
 def joint_limit_rows(
@@ -157,19 +240,7 @@ def joint_limit_rows(
     accelerate further down, at its upper limit not further up. Ball joints
     have no scalar range and are left to the rest pose.
     """
-    model = robot.model
-    rows, offsets = [], []
-    for joint in model.joints[2:]:
-        if joint.nq != 1:
-            continue
-        value = q[joint.idx_q]
-        lower, upper = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
-        sign = 1.0 if value <= lower else -1.0 if value >= upper else 0.0
-        if sign:
-            row = np.zeros(size)
-            row[nu + joint.idx_v] = sign
-            rows.append(row)
-            offsets.append(0.0)
-    if not rows:
-        return np.zeros((0, size)), np.zeros(0)
-    return np.array(rows), np.array(offsets)
+    indices, signs = LayoutIndex(robot).joint_limit_signs(q)
+    rows = np.zeros((indices.size, size))
+    rows[np.arange(indices.size), nu + indices] = signs
+    return rows, np.zeros(indices.size)

@@ -115,18 +115,25 @@ import qpsolvers
 import scipy.sparse
 from qpsolvers.conversions import combine_linear_box_inequalities
 from qpsolvers.exceptions import QPError
+from scipy.linalg import lapack as _lapack
 
 try:
     from proxsuite import proxqp
 except ImportError:  # optional backend: qpsolvers then reports it as not installed
     proxqp = None
+try:
+    from daqp import solve as _daqp_solve
+except ImportError:  # optional backend: qpsolvers then reports it as not installed
+    _daqp_solve = None
 
 from controller_server.features.objective import Objective
 from controller_server.solvers.damped import damping_for_gain_bound
 
 __all__ = [
+    "GRAM_CONDITION_LIMIT",
     "QP_ITERATION_LIMITS",
     "QP_TIME_BUDGET_S",
+    "Level",
     "LevelReport",
     "PrioritizedSolution",
     "qp_data_limit",
@@ -159,6 +166,12 @@ QP_ITERATION_LIMITS: dict[str, dict[str, int]] = {
 """Iteration caps of every QP solve (:func:`solve_qp_bounded`); quadprog needs none."""
 
 
+GRAM_CONDITION_LIMIT = 1e3
+"""Largest condition number of a level flagged well conditioned (:attr:`Level.well_conditioned`)
+whose SVD comes from the eigendecomposition of ``Ā Āᵀ`` (:func:`_gram_svd`)."""
+
+_EPSILON = float(np.finfo(float).eps)
+_TINY = float(np.finfo(float).tiny)
 _FALLBACK_ORDER = ("daqp", "quadprog", "proxqp")
 """Solvers tried, in this order, after the chosen one fails on a QP."""
 _NULL_CURVATURES = (1e-6, 1e-4)
@@ -213,6 +226,29 @@ _BACKENDS: dict[str, _Backend] = {
         retry={"eps_abs": 1e-8},
     ),
 }
+
+
+@dataclass(frozen=True)
+class Level:
+    """One priority level as stacked rows ``√w A`` and ``√w b`` (de Lasa 2010, eq. 37).
+
+    What :func:`solve_prioritized` makes of a sequence of :class:`Objective` s; a caller
+    that has the rows already (the prioritized controller) passes them as they are.
+
+    Attributes:
+        names: Names of the level's objectives (for the report).
+        A: ``(m, n)`` rows, each already scaled by the square root of its weight.
+        b: ``(m,)`` right-hand side, scaled alike.
+        well_conditioned: The caller knows the rows to be linearly independent and well
+            conditioned (the equations of motion: ``M ≻ 0``). The level's SVD may then come
+            from the eigendecomposition of ``Ā Āᵀ`` (see :func:`_gram_svd`); the solver checks
+            the condition and falls back to the SVD of ``Ā`` when it is not small.
+    """
+
+    names: tuple[str, ...]
+    A: np.ndarray
+    b: np.ndarray
+    well_conditioned: bool = False
 
 
 @dataclass(frozen=True)
@@ -278,7 +314,7 @@ class PrioritizedSolution:
 
 
 def solve_prioritized(
-    levels: Sequence[Sequence[Objective] | Objective],
+    levels: Sequence[Level | Sequence[Objective] | Objective],
     inequality_matrix: np.ndarray,
     inequality_offset: np.ndarray,
     *,
@@ -293,8 +329,9 @@ def solve_prioritized(
 
     Args:
         levels: Priority levels, highest first; each a sequence of objectives over the same
-            ``n`` unknowns, combined by their row weights (eq. 16, 37). A single
-            :class:`Objective` counts as a level of one. Empty levels are skipped.
+            ``n`` unknowns, combined by their row weights (eq. 16, 37), or a :class:`Level`
+            of rows already combined. A single :class:`Objective` counts as a level of one.
+            Empty levels are skipped.
         inequality_matrix: ``D``, ``(p, n)`` (``p`` may be 0; it also fixes ``n``).
         inequality_offset: ``f``, ``(p,)``, for ``D x + f ≥ 0`` (eq. 28's ``D₀, f₀``).
         gain_bound: ``B``: singular values below ``1/B`` are treated as singular and the
@@ -336,12 +373,13 @@ def solve_prioritized(
 
     C_bar: np.ndarray | None = None  # None stands for I (saves an n × n product)
     D_C_bar = D
-    d_bar = np.zeros(n)
+    d_bar: np.ndarray | None = None  # None stands for 0
     slack = f.copy()  # D d̄ + f, kept up to date with d̄
     reports: list[LevelReport] = []
     clock = _QPClock(qp_time_budget_s)
-    stopped = infeasible = failed = False
-    for level_index, (names, A, b) in enumerate(stacked):
+    stopped = infeasible = failed = solved_any = False
+    for level_index, level in enumerate(stacked):
+        names, A = level.names, level.A
         if stopped:
             reports.append(LevelReport(names, "not reached", 0.0, 0, 0, 0.0, 0.0, False))
             continue
@@ -350,7 +388,7 @@ def solve_prioritized(
             reports.append(LevelReport(names, "empty", 0.0, 0, dimension, 0.0, 0.0, False))
             continue
         A_bar = A if C_bar is None else A @ C_bar  # Algorithm 1, line 3
-        b_bar = b - A @ d_bar  # line 4
+        b_bar = level.b if d_bar is None else level.b - A @ d_bar  # line 4
         step = _solve_level(
             A_bar,
             b_bar,
@@ -361,8 +399,9 @@ def solve_prioritized(
             feasibility_tolerance,
             persist=level_index == 0,
             clock=clock,
+            gram=level.well_conditioned,
         )
-        if step.w is None and level_index > 0 and _any_solved(reports):
+        if step.w is None and level_index > 0 and solved_any:
             # Below a solved level w = 0 is feasible, so this is the QP solver failing, not
             # Algorithm 1's infeasibility: keep d̄ and C̄ and go on with the next level.
             reports.append(
@@ -396,9 +435,11 @@ def solve_prioritized(
             )
             stopped = infeasible = True
             continue
-        d_bar = d_bar + (step.w if C_bar is None else C_bar @ step.w)  # line 10
+        move = step.w if C_bar is None else C_bar @ step.w
+        d_bar = move if d_bar is None else d_bar + move  # line 10
         slack = step.slack
         dimension = step.null_basis.shape[1]
+        solved_any = True
         reports.append(
             LevelReport(
                 names,
@@ -415,18 +456,18 @@ def solve_prioritized(
             stopped = True
             continue
         C_bar = step.null_basis if C_bar is None else C_bar @ step.null_basis  # line 14
-        D_C_bar = D_C_bar @ step.null_basis
+        D_C_bar = step.D_null if step.D_null is not None else D_C_bar @ step.null_basis
 
-    x = d_bar
+    x = np.zeros(n) if d_bar is None else d_bar
     violation = max(0.0, -float(np.min(D @ x + f))) if D.shape[0] else 0.0
     return PrioritizedSolution(
         found=not (infeasible or failed) and violation <= feasibility_tolerance,
         x=x,
         levels=tuple(
             report
-            if A.shape[0] == 0
-            else replace(report, residual=float(np.linalg.norm(A @ x - b)))
-            for report, (_, A, b) in zip(reports, stacked, strict=True)
+            if level.A.shape[0] == 0
+            else replace(report, residual=float(np.linalg.norm(level.A @ x - level.b)))
+            for report, level in zip(reports, stacked, strict=True)
         ),
         inequality_violation=violation,
         qp_solver=qp_solver,
@@ -454,6 +495,9 @@ def solve_qp_bounded(
     ``settings`` may lower a cap but not raise it. ProxQP is called through its own dense
     ``QP`` class (same settings, same defaults), because ``qpsolvers`` passes on only the
     options of ``proxqp.dense.solve``, which lack the inner-iteration cap ``max_iter_in``.
+    DAQP, on dense inequality-only problems (the prioritized levels' QPs), is called
+    directly with exactly the arguments ``qpsolvers`` would pass it: its checks and
+    conversions cost more than the solve of a small level.
 
     Raises:
         qpsolvers.exceptions.QPError: As :func:`qpsolvers.solve_problem` (unknown solver,
@@ -463,6 +507,9 @@ def solve_qp_bounded(
     capped = {**settings, **{key: min(cap, settings.get(key, cap)) for key, cap in limits.items()}}
     P, q, G, h, A, b, lb, ub = problem.unpack()
     dense = not any(scipy.sparse.issparse(matrix) for matrix in (P, G, A))
+    if solver == "daqp" and dense and _daqp_solve is not None and A is None and lb is None:
+        if ub is None and G is not None and h is not None:
+            return _solve_daqp(problem, P, q, G, h, capped)
     if solver != "proxqp" or proxqp is None or not dense:
         if solver == "proxqp":  # qpsolvers' proxqp_solve_problem knows no max_iter_in
             capped.pop("max_iter_in", None)
@@ -491,6 +538,41 @@ def solve_qp_bounded(
     )
 
 
+def _solve_daqp(
+    problem: qpsolvers.Problem,
+    P: np.ndarray,
+    q: np.ndarray,
+    G: np.ndarray,
+    h: np.ndarray,
+    settings: dict[str, Any],
+) -> qpsolvers.Solution:
+    """``min ½ xᵀ P x + qᵀ x  s.t.  G x ≤ h`` by ``daqp.solve``, as ``qpsolvers`` calls it.
+
+    The same arguments as ``qpsolvers.solvers.daqp_.daqp_solve_problem`` (``h`` as the upper
+    bound, ``-1e30`` below, every row an inequality), so the same result.
+    """
+    if G.ndim != 2 or h.shape != (G.shape[0],):  # what Problem.check_constraints refuses
+        raise qpsolvers.ProblemError(f"inconsistent G x ≤ h: {G.shape=}, {h.shape=}")
+    rows = G.shape[0]
+    build_start = time.perf_counter()
+    lower = np.full(rows, -1e30)
+    sense = np.zeros(rows, dtype=np.intc)
+    solve_start = time.perf_counter()
+    x, objective, exitflag, info = _daqp_solve(P, q, G, h, lower, sense, **settings)
+    solve_end = time.perf_counter()
+    solution = qpsolvers.Solution(problem)
+    solution.found = exitflag > 0
+    if exitflag > 0:
+        solution.x = x
+        solution.obj = objective
+        solution.z_box = info["lam"][:0]
+        solution.z = info["lam"][:rows]
+        solution.y = info["lam"][rows:]
+    solution.build_time = solve_start - build_start
+    solution.solve_time = solve_end - solve_start
+    return solution
+
+
 @dataclass
 class _QPClock:
     """The QP solves of one :func:`solve_prioritized` call, against its time budget."""
@@ -507,14 +589,12 @@ class _QPClock:
         return allowed
 
 
-def _any_solved(reports: Sequence[LevelReport]) -> bool:
-    """Whether some level above was solved (so that ``w = 0`` is feasible below it)."""
-    return any(report.status == "solved" for report in reports)
-
-
 @dataclass(frozen=True)
 class _LevelStep:
-    """One level's step ``w`` (``None`` if infeasible) and what Algorithm 1 needs next."""
+    """One level's step ``w`` (``None`` if infeasible) and what Algorithm 1 needs next.
+
+    ``D_null`` is ``D C̄ null(Ā)`` when the level's QP computed it already (else ``None``).
+    """
 
     w: np.ndarray | None
     slack: np.ndarray
@@ -524,6 +604,7 @@ class _LevelStep:
     tolerance: float
     used_qp: bool
     detail: str = ""
+    D_null: np.ndarray | None = None
 
 
 def _solve_level(
@@ -536,12 +617,23 @@ def _solve_level(
     feasibility_tolerance: float,
     persist: bool,
     clock: _QPClock,
+    gram: bool = False,
 ) -> _LevelStep:
-    """Algorithm 1, lines 5–6 and ``null(Ā)``, from one SVD of ``Ā``."""
+    """Algorithm 1, lines 5–6 and ``null(Ā)``, from one SVD of ``Ā``.
+
+    With ``gram`` (a level known to be well conditioned), the SVD of a wide ``Ā`` comes from
+    :func:`_gram_svd` when its condition allows.
+    """
     m, k = A_bar.shape
-    # Thin SVD, except for wide Ā, whose null space needs all k rows of Vᵀ.
-    U, sigma, Vt = np.linalg.svd(A_bar, full_matrices=m < k)
-    rounding_floor = (float(sigma[0]) if sigma.size else 0.0) * max(m, k) * np.finfo(float).eps
+    decomposition = _gram_svd(A_bar) if gram and 0 < m <= k else None
+    if decomposition is None:
+        # Thin SVD, except for wide Ā, whose null space needs all k rows of Vᵀ.
+        U, sigma, Vt = np.linalg.svd(A_bar, full_matrices=m < k)
+        V = Vt.T
+    else:
+        U, sigma, V = decomposition
+    sigma_max = float(sigma[0]) if sigma.size else 0.0
+    rounding_floor = sigma_max * max(m, k) * _EPSILON
     tolerance = max(1.0 / gain_bound, rounding_floor)
     rank = int(np.count_nonzero(sigma >= tolerance))
     # Singular values at the rounding floor are noise, not small: like the directions without
@@ -551,7 +643,6 @@ def _solve_level(
     # for σᵢ ≥ 1/B, so only the weak tail (σ sorted descending) calls it; 1/(2B) for σ = 0.
     # Directions without gain (σ = 0 or at the rounding floor) are free for the levels below:
     # the QP only needs them strictly convex, not penalized against this level's residual.
-    sigma_max = float(sigma[0]) if sigma.size else 0.0
     curvature = np.zeros(k)
     curvature[:used] = sigma[:used] ** 2
     weak = int(np.searchsorted(-sigma[:used], -1.0 / gain_bound, side="right"))
@@ -559,9 +650,10 @@ def _solve_level(
         curvature[i] += damping_for_gain_bound(float(sigma[i]), gain_bound) ** 2
     damping = damping_for_gain_bound(float(sigma[used - 1]), gain_bound) if used else 0.0
     linear = sigma[:used] * (U[:, :used].T @ b_bar)  # −(gradient at z = 0)
-    w = Vt[:used].T @ (linear / curvature[:used])  # damped least squares, eq. 15–16
-    null_basis = Vt[rank:].T
+    w = V[:, :used] @ (linear / curvature[:used])  # damped least squares, eq. 15–16
+    null_basis = V[:, rank:]
     used_qp = False
+    D_null = None
     if D_C_bar.shape[0]:
         D_C_bar_w = D_C_bar @ w
         new_slack = slack + D_C_bar_w
@@ -578,7 +670,7 @@ def _solve_level(
                     None, slack, null_basis, rank, damping, tolerance, used_qp, detail
                 )
             refusals = clock.refusals
-            D_C_bar_V = D_C_bar @ Vt.T
+            D_C_bar_V = D_C_bar @ V
             # Violations already accepted (≤ tolerance, by a level above) may stay but not
             # grow: w = 0 is then exactly feasible, which degenerate vertices (more active
             # rows than unknowns, common in low levels) need for proxqp and quadprog.
@@ -587,7 +679,7 @@ def _solve_level(
             # curvatures; below it a failure only skips the level, so one solver is enough.
             curvatures = _NULL_CURVATURES if persist else _NULL_CURVATURES[:1]
             for index, null_curvature in enumerate(curvatures):
-                curvature[used:] = max((null_curvature * sigma_max) ** 2, np.finfo(float).tiny)
+                curvature[used:] = max((null_curvature * sigma_max) ** 2, _TINY)
                 z_qp = _solve_qp(
                     curvature,
                     linear,
@@ -604,7 +696,8 @@ def _solve_level(
                     continue
                 new_slack = slack + D_C_bar_V @ z_qp
                 if np.min(new_slack) >= -feasibility_tolerance:  # also rejects NaN
-                    w = Vt.T @ z_qp
+                    w = V @ z_qp
+                    D_null = D_C_bar_V[:, rank:]
                     break
             else:
                 detail = (
@@ -616,7 +709,45 @@ def _solve_level(
                     None, slack, null_basis, rank, damping, tolerance, used_qp, detail
                 )
         slack = new_slack
-    return _LevelStep(w, slack, null_basis, rank, damping, tolerance, used_qp)
+    return _LevelStep(w, slack, null_basis, rank, damping, tolerance, used_qp, D_null=D_null)
+
+
+def _gram_svd(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """``U``, ``σ`` (descending) and ``V`` (``k × k``) of a wide ``A`` from ``eigh(A Aᵀ)``.
+
+    ``A Aᵀ = U Σ² Uᵀ``, ``V[:, :m] = Aᵀ U Σ⁻¹`` and the rest of ``V`` any orthonormal basis
+    of ``null(A)`` (:func:`_orthogonal_complement`): the directions without a singular value
+    all get the same QP curvature, so which basis does not matter. Squaring loses
+    ``ε κ²`` relative in ``σ_min`` (κ the condition number); ``None`` unless
+    ``κ ≤`` :data:`GRAM_CONDITION_LIMIT` (then ≲ 1e-10, and ≈ 2e-12 for the equations of
+    motion of the built-in models, κ ≈ 100): the caller takes the SVD of ``A`` instead.
+    The ``m × m`` eigendecomposition costs about a third of the ``m × k`` SVD.
+    """
+    m, k = A.shape
+    eigenvalues, eigenvectors = np.linalg.eigh(A @ A.T)
+    if not eigenvalues[0] >= eigenvalues[-1] / GRAM_CONDITION_LIMIT**2:  # also NaN
+        return None
+    sigma = np.sqrt(eigenvalues[::-1])
+    U = np.ascontiguousarray(eigenvectors[:, ::-1])  # descending; BLAS needs positive strides
+    V = np.empty((k, k))
+    V[:, :m] = (A.T @ U) / sigma
+    if m < k:
+        V[:, m:] = _orthogonal_complement(V[:, :m])
+    return U, sigma, V
+
+
+def _orthogonal_complement(V: np.ndarray) -> np.ndarray:
+    """An orthonormal basis ``(k, k − m)`` of the complement of ``V``'s orthonormal columns.
+
+    The last columns of ``Q`` in the Householder QR of ``V`` (LAPACK ``geqrf``, then ``ormqr``
+    applied to ``[0; I]``), without forming all of ``Q``.
+    """
+    k, m = V.shape
+    factors, tau, _, _ = _lapack.dgeqrf(V)
+    identity = np.zeros((k, k - m), order="F")
+    identity[m:] = np.eye(k - m)
+    complement, _, _ = _lapack.dormqr("L", "N", factors, tau, identity, lwork=64 * k)
+    return complement
 
 
 def _solve_qp(
@@ -680,10 +811,17 @@ def _solve_qp(
     return None
 
 
-def _stack_level(
-    level: Sequence[Objective] | Objective, n: int
-) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
-    """Names and the rows ``√w A``, ``√w b`` of one level (de Lasa 2010, eq. 37)."""
+def _stack_level(level: Level | Sequence[Objective] | Objective, n: int) -> Level:
+    """The level's rows ``√w A``, ``√w b`` (de Lasa 2010, eq. 37), checked."""
+    if isinstance(level, Level):
+        A, b = np.asarray(level.A, dtype=float), np.asarray(level.b, dtype=float)
+        if A.ndim != 2 or A.shape[1] != n or b.shape != (A.shape[0],):
+            raise ValueError(
+                f"level {level.names} needs A (m, {n}) and b (m,), got {A.shape=}, {b.shape=}"
+            )
+        if not (np.isfinite(A).all() and np.isfinite(b).all()):
+            raise ValueError(f"level {level.names} has non-finite A or b")
+        return level if A is level.A and b is level.b else replace(level, A=A, b=b)
     objectives = (level,) if isinstance(level, Objective) else tuple(level)
     names = tuple(objective.name for objective in objectives)
     blocks_A: list[np.ndarray] = []
@@ -709,7 +847,7 @@ def _stack_level(
         blocks_A.append(root_weight[:, None] * A)
         blocks_b.append(root_weight * b)
     if not blocks_A:
-        return names, np.zeros((0, n)), np.zeros(0)
+        return Level(names, np.zeros((0, n)), np.zeros(0))
     if len(blocks_A) == 1:
-        return names, blocks_A[0], blocks_b[0]
-    return names, np.vstack(blocks_A), np.concatenate(blocks_b)
+        return Level(names, blocks_A[0], blocks_b[0])
+    return Level(names, np.vstack(blocks_A), np.concatenate(blocks_b))
