@@ -99,10 +99,16 @@ EXACT_GAIN_BOUND = 1e15
 
 
 class _Term(NamedTuple):
-    """An objective over one block of ``x = [τ, q̈, λ]`` (its ``A`` has the block's columns)."""
+    """An objective over one block of ``x = [τ, q̈, λ]`` (its ``A`` has the block's columns).
+
+    ``weight`` is the objective's weight when every row has it (``None`` otherwise), and
+    ``active`` whether any row has a positive one.
+    """
 
     objective: Objective
     columns: slice
+    weight: float | None
+    active: bool
 
 
 OBJECTIVES: dict[str, tuple[int, float, str]] = {
@@ -255,6 +261,8 @@ class PrioritizedController(Controller):
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self._data = robot.model.createData()
         self._index = LayoutIndex(robot)
+        self._planted_cache: tuple[int, tuple[bool, ...]] = (0, ())
+        self._friction_cache: tuple[int, tuple[float, ...]] = (0, ())
         self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._height_change_start_s: float | None = None  # state time a new height was set
         self._pending_height_change = False
@@ -314,20 +322,22 @@ class PrioritizedController(Controller):
         layout = PrioritizedLayout(
             self._index,
             terms,
-            [allowed > 0.5 for allowed in p["support_mask"]],
+            self._planted(),
             flags,
-            p["friction_coefficients"],
+            self._friction_key(),
             p["ground_height"],
             p["contact_distance"],
         )
         objectives, desired_rates = self._objectives(control_input, terms, layout)
         D, f = layout.inequalities(control_input.q, p["non_penetration"])
-        arrays = [a for term in objectives.values() for a in (term.objective.A, term.objective.b)]
-        if not all(np.isfinite(a).all() for a in (*arrays, D, f)):
+        if not all(
+            np.isfinite(term.objective.A).all() and np.isfinite(term.objective.b).all()
+            for term in objectives.values()
+        ) or not (np.isfinite(D).all() and np.isfinite(f).all()):
             not_finite = [
                 name
-                for name, (objective, _) in objectives.items()
-                if not (np.isfinite(objective.A).all() and np.isfinite(objective.b).all())
+                for name, term in objectives.items()
+                if not (np.isfinite(term.objective.A).all() and np.isfinite(term.objective.b).all())
             ] + ([] if np.isfinite(D).all() and np.isfinite(f).all() else ["inequalities"])
             # Velocities so large that the objectives overflow.
             raise ControllerFailed(
@@ -336,18 +346,26 @@ class PrioritizedController(Controller):
             )
         grouped: dict[int, list[_Term]] = {}
         for name, term in objectives.items():
-            if name not in ("dynamics", "forces") and np.any(term.objective.weight > 0):
+            if name not in ("dynamics", "forces") and term.active:
                 grouped.setdefault(p[f"priority_{name}"], []).append(term)
-        # The equations of motion have full row rank (M ≻ 0) and a small condition number.
+        # The equations of motion have full row rank (M ≻ 0) and a small condition number;
+        # the levels on q̈ see nothing of the motionless forces in their null space.
         levels = [
-            _normalized_level([objectives["dynamics"]], layout.size, well_conditioned=True),
+            _normalized_level(
+                [objectives["dynamics"]],
+                layout.size,
+                well_conditioned=True,
+                null_space_part=layout.motionless_forces(),
+            ),
             *(_normalized_level(grouped[k], layout.size) for k in sorted(grouped)),
             _normalized_level([objectives["forces"]], layout.size),
         ]
         # The equations of motion are kept exactly (rounding floor only): a gain bound there
         # would let lower levels bend the dynamics of a heavy robot.
         bounds = [EXACT_GAIN_BOUND] + [p["gain_bound"]] * (len(levels) - 1)
-        solution = solve_prioritized(levels, D, f, gain_bound=bounds, qp_solver=p["qp_solver"])
+        solution = solve_prioritized(
+            levels, D, f, gain_bound=bounds, qp_solver=p["qp_solver"], check_finite=False
+        )
         top = solution.levels[0]
         if top.status != "solved":
             raise ControllerFailed(
@@ -355,6 +373,22 @@ class PrioritizedController(Controller):
                 f"{p['qp_solver']}{': ' + top.detail if top.detail else ''}); no command"
             )
         return self._output(terms, layout, flags, objectives, desired_rates, solution)
+
+    def _planted(self) -> tuple[bool, ...]:
+        """Per contact, whether ``support_mask`` allows it (cached per parameter value)."""
+        mask = self._params["support_mask"]
+        key = id(mask)
+        if self._planted_cache[0] != key:
+            self._planted_cache = (key, tuple(bool(allowed > 0.5) for allowed in mask))
+        return self._planted_cache[1]
+
+    def _friction_key(self) -> tuple[float, ...]:
+        """``friction_coefficients`` as a tuple (cached per parameter value)."""
+        mus = self._params["friction_coefficients"]
+        key = id(mus)
+        if self._friction_cache[0] != key:
+            self._friction_cache = (key, tuple(float(mu) for mu in mus))
+        return self._friction_cache[1]
 
     def _objectives(
         self, control_input: ControlInput, terms: DynamicsTerms, layout: PrioritizedLayout
@@ -449,14 +483,20 @@ class PrioritizedController(Controller):
             p["weight_pose"],
         )
         on_acceleration += [pose, trunk]
-        everything = slice(0, layout.size)
+        selection = np.asarray(p["torque_selection"])
+        torque_weight = float(p["weight_torque"])
         objectives = {
-            "dynamics": _Term(layout.equations_of_motion(terms), everything),
-            **{o.name: _Term(o, layout.acceleration) for o in on_acceleration},
-            "forces": _Term(layout.least_forces(), layout.force),
+            "dynamics": _Term(layout.equations_of_motion(terms), slice(0, layout.size), 1.0, True),
+            **{
+                o.name: _Term(o, layout.acceleration, weight, weight > 0)
+                for o, weight in ((o, float(p[f"weight_{o.name}"])) for o in on_acceleration)
+            },
+            "forces": _Term(layout.least_forces(), layout.force, 1.0, True),
             "torque": _Term(
-                layout.least_torque(np.asarray(p["torque_selection"]), p["weight_torque"]),
+                layout.least_torque(selection, torque_weight),
                 layout.torque,
+                None,
+                torque_weight > 0 and bool(np.any(selection > 0)),
             ),
         }
         desired_rates = {
@@ -534,10 +574,7 @@ class PrioritizedController(Controller):
             "centroidal_moment_pivot": cmp_,
             "supports": list(flags),
             "support_polygon_xy": layout.support_polygon.reshape(-1),
-            "objective_residuals": {
-                name: objective.residual(x[columns])
-                for name, (objective, columns) in objectives.items()
-            },
+            "objective_residuals": {name: _residual(term, x) for name, term in objectives.items()},
             "constraint_residual": constraint_residual,
             "root_wrench_residual": float(
                 np.linalg.norm(dynamics.A[:NUM_ROOT_DOFS] @ x - dynamics.b[:NUM_ROOT_DOFS])
@@ -570,7 +607,21 @@ class PrioritizedController(Controller):
         )
 
 
-def _normalized_level(terms: Sequence[_Term], size: int, well_conditioned: bool = False) -> Level:
+def _residual(term: _Term, x: np.ndarray) -> float:
+    """``‖W^½ (A x − b)‖`` of the objective on its block of ``x``."""
+    objective = term.objective
+    error = objective.A @ x[term.columns] - objective.b
+    if term.weight is None:
+        return math.sqrt(float((objective.weight * error) @ error))
+    return math.sqrt(term.weight) * math.sqrt(float(error @ error))
+
+
+def _normalized_level(
+    terms: Sequence[_Term],
+    size: int,
+    well_conditioned: bool = False,
+    null_space_part: np.ndarray | None = None,
+) -> Level:
     """The level's rows ``√w A`` over ``x`` scaled to ``‖W^½ A‖_F = 1`` (de Lasa 2010, eq. 16, 37).
 
     Same minimizers. The levels come in their own units (N for the equations of motion, m/s²
@@ -578,17 +629,33 @@ def _normalized_level(terms: Sequence[_Term], size: int, well_conditioned: bool 
     ``B`` is a bound on each level's condition (σ < σ_max / B, within
     ``√rank``, is singular) rather than on singular values in mixed units.
     """
-    objectives = [term.objective for term in terms]
-    scale = math.sqrt(sum(float(o.weight @ np.einsum("ij,ij->i", o.A, o.A)) for o in objectives))
-    rows = sum(o.b.size for o in objectives)
-    A = np.zeros((rows, size))
-    b = np.empty(rows)
+    squared = 0.0
+    for objective, _, weight, _ in terms:
+        A = objective.A
+        if weight is None:
+            squared += float(objective.weight @ (A * A).sum(axis=1))
+        else:
+            squared += weight * float(np.vdot(A, A))
+    scale = math.sqrt(squared)
+    rows = sum(term.objective.b.size for term in terms)
+    A_level = np.zeros((rows, size))
+    b_level = np.empty(rows)
     start = 0
-    for objective, columns in terms:
-        weight = objective.weight / scale**2 if scale > 0.0 else objective.weight
-        root_weight = np.sqrt(weight)
+    for objective, columns, weight, _ in terms:
         end = start + objective.b.size
-        A[start:end, columns] = root_weight[:, None] * objective.A
-        b[start:end] = root_weight * objective.b
+        if weight is None:
+            root_weight = np.sqrt(objective.weight / scale**2 if scale > 0.0 else objective.weight)
+            A_level[start:end, columns] = root_weight[:, None] * objective.A
+            b_level[start:end] = root_weight * objective.b
+        else:
+            root = math.sqrt(weight / scale**2 if scale > 0.0 else weight)
+            np.multiply(objective.A, root, out=A_level[start:end, columns])
+            np.multiply(objective.b, root, out=b_level[start:end])
         start = end
-    return Level(tuple(o.name for o in objectives), A, b, well_conditioned)
+    return Level(
+        tuple(term.objective.name for term in terms),
+        A_level,
+        b_level,
+        well_conditioned,
+        null_space_part,
+    )

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from functools import cache
 
 import numpy as np
+from scipy.linalg import lapack, solve_triangular
 
 from controller_server.balance_points import support_polygon
 from controller_server.dynamics import DynamicsTerms
@@ -46,14 +46,6 @@ def friction_cone_basis(friction_coefficient: float) -> np.ndarray:
     return edges / np.linalg.norm(edges, axis=0)
 
 
-@cache
-def _cone_basis(friction_coefficient: float) -> np.ndarray:
-    """:func:`friction_cone_basis`, computed once per coefficient (read-only)."""
-    basis = friction_cone_basis(friction_coefficient)
-    basis.flags.writeable = False
-    return basis
-
-
 class LayoutIndex:
     """What the layout needs of a robot that no state changes, computed once.
 
@@ -81,6 +73,34 @@ class LayoutIndex:
         self._limit_v = np.array([joint.idx_v for joint in scalar], dtype=int)
         self._lower = np.asarray(model.lowerPositionLimit)[self._limit_q]
         self._upper = np.asarray(model.upperPositionLimit)[self._limit_q]
+        self._points: dict[tuple[bool, ...], np.ndarray] = {}
+        self._friction: tuple[tuple[float, ...], tuple[np.ndarray, np.ndarray]] | None = None
+
+    def points_of(self, contacts: tuple[bool, ...]) -> np.ndarray:
+        """Indices of the points of the contacts flagged in ``contacts`` (read-only, cached)."""
+        points = self._points.get(contacts)
+        if points is None:
+            points = np.flatnonzero(np.asarray(contacts, dtype=bool)[self.owner])
+            points.flags.writeable = False
+            self._points = {**self._points, contacts: points} if len(self._points) < 64 else {}
+        return points
+
+    def friction_at_points(self, coefficients: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """Per point: μ of its contact ``(points,)`` and its friction pyramid ``(points, 3, 4)``.
+
+        Read-only, computed once per value of ``friction_coefficients`` (the last one kept).
+        """
+        if self._friction is None or self._friction[0] != coefficients:
+            mus = np.asarray(coefficients, dtype=float)[self.owner]
+            cones = (
+                np.stack([friction_cone_basis(float(mu)) for mu in mus])
+                if mus.size
+                else np.zeros((0, 3, 4))
+            )
+            mus.flags.writeable = False
+            cones.flags.writeable = False
+            self._friction = (coefficients, (mus, cones))
+        return self._friction[1]
 
     def joint_limit_signs(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Velocity indices of the 1-DoF joints at or past a limit, and ``+1`` (lower) or ``−1``.
@@ -118,42 +138,36 @@ class PrioritizedLayout:
         terms: DynamicsTerms,
         planted: Sequence[bool],
         supports: Sequence[bool],
-        friction_coefficients: np.ndarray,
+        friction_coefficients: Sequence[float],
         ground_height: float,
         contact_distance: float,
     ):
         nv = index.nv
         self.index = index
         self.nv, self.nu = nv, index.nu
-        owner = index.owner
         positions = np.vstack(terms.position_points_in_world)
         count = len(positions)
         jacobian = np.vstack(terms.point_jacobians).reshape(count, 3, nv)
         drift = np.concatenate(terms.point_drifts).reshape(count, 3)
-        mus = np.asarray(friction_coefficients, dtype=float)[owner]
+        mus, cones = index.friction_at_points(tuple(friction_coefficients))
 
-        planted_points = np.flatnonzero(np.asarray(planted, dtype=bool)[owner])
+        planted_points = index.points_of(tuple(planted))
         #: Planted points: ``(3s, nv)`` Jacobian, ``(3s,)`` drift, ``(s, 3)`` positions.
         self.point_jacobian = jacobian[planted_points].reshape(-1, nv)
         self.point_drift = drift[planted_points].reshape(-1)
         self.point_positions = positions[planted_points]
-        supporting = np.flatnonzero(np.asarray(supports, dtype=bool)[owner])
+        supporting = index.points_of(tuple(supports))
         #: Supporting points' positions ``(k, 3)``: the base of support.
         self.support_positions = positions[supporting]
         #: Their convex hull, counter-clockwise x–y vertices.
         self.support_polygon = support_polygon(self.support_positions)
         self.smallest_friction_coefficient = float(mus[supporting].min(initial=math.inf))
-        near = positions[planted_points, 2] <= ground_height + contact_distance
-        loaded = planted_points[near]
+        loaded = planted_points[self.point_positions[:, 2] <= ground_height + contact_distance]
         #: Indices (over all the robot's contact points) of the points carrying force.
         self.force_point_indices = loaded
         self.nl = 4 * loaded.size
         #: ``(p, 3, 4)``: each loaded point's V, the block diagonal of eq. 23.
-        self.cones = (
-            np.stack([_cone_basis(float(mu)) for mu in mus[loaded]])
-            if loaded.size
-            else np.zeros((0, 3, 4))
-        )
+        self.cones = cones[loaded]
         cones_T = self.cones.transpose(0, 2, 1)
         #: ``(4p, nv)`` and ``(4p,)``: ``Vᵀ J_c`` and ``Vᵀ J̇_c q̇`` of eq. 26, point by point.
         self.cone_jacobian = np.matmul(cones_T, jacobian[loaded]).reshape(self.nl, nv)
@@ -180,6 +194,43 @@ class PrioritizedLayout:
         np.negative(terms.mass_matrix, out=A[:, self.acceleration])
         A[:, self.force] = self.contact_force_map
         return Objective("dynamics", A, terms.bias_forces, np.ones(self.nv))
+
+    def motionless_forces(self) -> np.ndarray:
+        """``(size, f)`` orthonormal basis of ``{x = (τ, 0, λ) : Sᵀ τ + J_cᵀ V λ = 0}``.
+
+        Contact forces balanced by torques alone, with no acceleration: the internal
+        forces between the feet and the torques that hold them. They are in the null space
+        of the equations of motion (eq. 24) and every objective on ``q̈`` is exactly zero on
+        them (their ``q̈`` rows are exact zeros), so the solver keeps them apart
+        (:attr:`~controller_server.solvers.prioritized.Level.null_space_part`) for the
+        levels that see ``λ`` or ``τ``. ``λ`` spans the null space of the root rows of
+        ``J_cᵀ V`` (directions with a singular value above the rounding floor are left
+        out: they are not exactly motionless), ``τ = −(J_cᵀ V)_joints λ``.
+        """
+        nl = self.nl
+        root = self.contact_force_map[:NUM_ROOT_DOFS]
+        if nl <= NUM_ROOT_DOFS:
+            return np.zeros((self.size, 0))
+        # null(root) from the Householder QR of rootᵀ, when its R shows full rank (≥ 3 loaded
+        # points not on a line); otherwise no part is kept apart (a few points: small levels).
+        factors, tau, _, _ = lapack.dgeqrf(root.T)
+        diagonal = np.abs(factors.diagonal())
+        if not diagonal.min() > diagonal.max() * nl * 8 * np.finfo(float).eps:
+            return np.zeros((self.size, 0))
+        selector = np.zeros((nl, nl - NUM_ROOT_DOFS), order="F")
+        selector[NUM_ROOT_DOFS:] = np.eye(nl - NUM_ROOT_DOFS)
+        balanced, _, _ = lapack.dormqr("L", "N", factors, tau, selector, lwork=64 * nl)
+        # (τ, λ) = (−J_jointsᵀ... λ, λ): orthonormal by one Cholesky (Gram I + KᵀK, K ~ lever
+        # arms, so well conditioned: orthogonal to rounding).
+        torques = self.contact_force_map[NUM_ROOT_DOFS:] @ balanced
+        gram = torques.T @ torques
+        gram.flat[:: gram.shape[0] + 1] += 1.0
+        lower = np.linalg.cholesky(gram)
+        basis = np.zeros((self.size, balanced.shape[1]))
+        basis[self.torque] = -torques
+        basis[self.force] = balanced
+        basis[:, :] = solve_triangular(lower, basis.T, lower=True, check_finite=False).T
+        return basis
 
     def least_forces(self) -> Objective:
         """``‖λ‖²`` over the ``λ`` block: the smallest of the forces the levels above leave free.
