@@ -48,6 +48,7 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg import lapack
 
 from controller_server.balance_points import (
     ground_reference_points,
@@ -263,6 +264,8 @@ class PrioritizedController(Controller):
         self._index = LayoutIndex(robot)
         self._planted_cache: tuple[int, tuple[bool, ...]] = (0, ())
         self._friction_cache: tuple[int, tuple[float, ...]] = (0, ())
+        self._forces_cache: dict[int, _Term] = {}
+        self._torque_cache: tuple[tuple[int, float] | None, Any] = (None, None)
         self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._height_change_start_s: float | None = None  # state time a new height was set
         self._pending_height_change = False
@@ -483,27 +486,44 @@ class PrioritizedController(Controller):
             p["weight_pose"],
         )
         on_acceleration += [pose, trunk]
-        selection = np.asarray(p["torque_selection"])
-        torque_weight = float(p["weight_torque"])
         objectives = {
             "dynamics": _Term(layout.equations_of_motion(terms), slice(0, layout.size), 1.0, True),
             **{
                 o.name: _Term(o, layout.acceleration, weight, weight > 0)
                 for o, weight in ((o, float(p[f"weight_{o.name}"])) for o in on_acceleration)
             },
-            "forces": _Term(layout.least_forces(), layout.force, 1.0, True),
-            "torque": _Term(
-                layout.least_torque(selection, torque_weight),
-                layout.torque,
-                None,
-                torque_weight > 0 and bool(np.any(selection > 0)),
-            ),
+            "forces": self._least_forces(layout),
+            "torque": self._least_torque(layout),
         }
         desired_rates = {
             "linear_momentum_rate": desired_linear_rate,
             "angular_momentum_rate": desired_angular_rate,
         }
         return objectives, desired_rates
+
+    def _least_forces(self, layout: PrioritizedLayout) -> _Term:
+        """``forces`` over the ``λ`` block (it depends on the number of loaded points only)."""
+        term = self._forces_cache.get(layout.nl)
+        if term is None:
+            term = _Term(layout.least_forces(), layout.force, 1.0, True)
+            self._forces_cache[layout.nl] = term
+        return term
+
+    def _least_torque(self, layout: PrioritizedLayout) -> _Term:
+        """``torque`` over the ``τ`` block (eq. 15), rebuilt when its parameters change."""
+        p = self._params
+        key = (id(p["torque_selection"]), p["weight_torque"])
+        if self._torque_cache[0] != key:
+            selection = np.asarray(p["torque_selection"], dtype=float)
+            weight = float(p["weight_torque"])
+            term = _Term(
+                layout.least_torque(selection, weight),
+                layout.torque,
+                None,
+                weight > 0 and bool(np.any(selection > 0)),
+            )
+            self._torque_cache = (key, term)
+        return self._torque_cache[1]
 
     def _height_acceleration(
         self, time_s: float, com: np.ndarray, com_velocity: np.ndarray
@@ -549,7 +569,10 @@ class PrioritizedController(Controller):
         # The acceleration τ and f really produce (equal to x's q̈ when eq. 22 holds).
         generalized = layout.contact_force_map @ x[layout.force]
         generalized[NUM_ROOT_DOFS:] += torque
-        acceleration = np.linalg.solve(terms.mass_matrix, generalized - terms.bias_forces)
+        # LAPACK's LU solve, as np.linalg.solve but without its dispatch.
+        _, _, acceleration, info = lapack.dgesv(terms.mass_matrix, generalized - terms.bias_forces)
+        if info:
+            raise np.linalg.LinAlgError("Singular matrix")
         momentum = terms.momentum
         cop, cmp_ = ground_reference_points(
             terms.position_contact_frames_in_world,

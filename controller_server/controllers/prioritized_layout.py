@@ -16,7 +16,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.linalg import lapack, solve_triangular
+from scipy.linalg import lapack
 
 from controller_server.balance_points import support_polygon
 from controller_server.dynamics import DynamicsTerms
@@ -225,11 +225,16 @@ class PrioritizedLayout:
         torques = self.contact_force_map[NUM_ROOT_DOFS:] @ balanced
         gram = torques.T @ torques
         gram.flat[:: gram.shape[0] + 1] += 1.0
-        lower = np.linalg.cholesky(gram)
+        upper, info = lapack.dpotrf(gram)  # gram = Rᵀ R
+        if info:
+            return np.zeros((self.size, 0))
+        inverse, info = lapack.dtrtri(upper)
+        if info:
+            return np.zeros((self.size, 0))
         basis = np.zeros((self.size, balanced.shape[1]))
-        basis[self.torque] = -torques
-        basis[self.force] = balanced
-        basis[:, :] = solve_triangular(lower, basis.T, lower=True, check_finite=False).T
+        np.matmul(torques, inverse, out=basis[self.torque])
+        np.negative(basis[self.torque], out=basis[self.torque])
+        np.matmul(balanced, inverse, out=basis[self.force])
         return basis
 
     def least_forces(self) -> Objective:

@@ -105,6 +105,7 @@ equality constraints.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -232,6 +233,9 @@ _BACKENDS: dict[str, _Backend] = {
         retry={"eps_abs": 1e-8},
     ),
 }
+
+
+_DEFAULT_BACKEND = _Backend({})
 
 
 @dataclass(frozen=True)
@@ -479,7 +483,7 @@ def solve_prioritized(
         levels=tuple(
             report
             if level.A.shape[0] == 0
-            else replace(report, residual=float(np.linalg.norm(level.A @ x - level.b)))
+            else replace(report, residual=_norm(level.A @ x - level.b))
             for report, level in zip(reports, stacked, strict=True)
         ),
         inequality_violation=violation,
@@ -519,10 +523,18 @@ def solve_qp_bounded(
     limits = QP_ITERATION_LIMITS.get(solver, {})
     capped = {**settings, **{key: min(cap, settings.get(key, cap)) for key, cap in limits.items()}}
     P, q, G, h, A, b, lb, ub = problem.unpack()
+    if (
+        solver == "daqp"
+        and _daqp_solve is not None
+        and type(P) is np.ndarray
+        and type(G) is np.ndarray
+        and h is not None
+        and A is None
+        and lb is None
+        and ub is None
+    ):
+        return _solve_daqp(problem, P, q, G, h, capped)
     dense = not any(scipy.sparse.issparse(matrix) for matrix in (P, G, A))
-    if solver == "daqp" and dense and _daqp_solve is not None and A is None and lb is None:
-        if ub is None and G is not None and h is not None:
-            return _solve_daqp(problem, P, q, G, h, capped)
     if solver != "proxqp" or proxqp is None or not dense:
         if solver == "proxqp":  # qpsolvers' proxqp_solve_problem knows no max_iter_in
             capped.pop("max_iter_in", None)
@@ -635,7 +647,10 @@ class _Seen:
                 seen.append((basis, D_basis, product))
             else:
                 unseen.append((basis, D_basis))
-        D_unseen = np.hstack([D_basis for _, D_basis in unseen]) if unseen else D[:, :0]
+        if len(unseen) > 1:
+            D_unseen = np.hstack([D_basis for _, D_basis in unseen])
+        else:
+            D_unseen = unseen[0][1] if unseen else D[:, :0]
         if len(seen) == 1:
             basis, D_basis, product = seen[0]
             return _Seen(product, D_basis, D_unseen, basis, unseen)
@@ -840,6 +855,11 @@ def _symmetric_eigen(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return solver.eigenvalues(), solver.eigenvectors()
 
 
+def _norm(vector: np.ndarray) -> float:
+    """Euclidean norm of a finite vector (``np.linalg.norm`` without its dispatch)."""
+    return math.sqrt(float(vector @ vector))
+
+
 def _prefix(values: list[float], holds: Any) -> int:
     """Length of the prefix of ``values`` (sorted descending) on which ``holds`` is true."""
     count = len(values)
@@ -931,22 +951,27 @@ def _solve_qp(
     solver's first settings always run; retry settings, and every attempt without
     ``first``, only while ``clock``'s budget lasts.
     """
-    names = [qp_solver] + [
-        name
-        for name in _FALLBACK_ORDER
-        if fallbacks and name != qp_solver and name in qpsolvers.available_solvers
-    ]
+    names = [qp_solver]
+    if fallbacks:
+        names += [
+            name
+            for name in _FALLBACK_ORDER
+            if name != qp_solver and name in qpsolvers.available_solvers
+        ]
     gradient = np.zeros(curvature.size)
-    gradient[: linear.size] = -linear
+    np.negative(linear, out=gradient[: linear.size])
+    G = -D_C_bar_V
     for name in names:
-        backend = _BACKENDS.get(name, _Backend({}))
+        backend = _BACKENDS.get(name, _DEFAULT_BACKEND)
         problem_curvature = curvature
         if backend.curvature_floor:  # only in the directions passed down, never the kept ones
             problem_curvature = curvature.copy()
             floor = backend.curvature_floor * curvature.max()
             np.maximum(problem_curvature[rank:], floor, out=problem_curvature[rank:])
-        relaxed = bound + backend.bound_relaxation * feasibility_tolerance
-        problem = qpsolvers.Problem(np.diag(problem_curvature), gradient, -D_C_bar_V, relaxed)
+        relaxed = bound
+        if backend.bound_relaxation:
+            relaxed = bound + backend.bound_relaxation * feasibility_tolerance
+        problem = qpsolvers.Problem(np.diag(problem_curvature), gradient, G, relaxed)
         attempts = [backend.settings]
         if backend.retry is not None:
             attempts.append({**backend.settings, **backend.retry})
