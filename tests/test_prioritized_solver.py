@@ -7,6 +7,7 @@ import itertools
 
 import numpy as np
 import pytest
+import qpsolvers
 import scipy.linalg
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -14,9 +15,12 @@ from hypothesis import strategies as st
 from controller_server.features import Objective
 from controller_server.solvers import prioritized
 from controller_server.solvers.prioritized import (
+    GRAM_CONDITION_LIMIT,
+    Level,
     LevelReport,
     PrioritizedSolution,
     solve_prioritized,
+    solve_qp_bounded,
 )
 
 SOLVERS = ("daqp", "quadprog", "proxqp")
@@ -375,6 +379,129 @@ def test_qp_solvers_agree_on_a_strictly_convex_constrained_problem(seed):
     for first, second in itertools.combinations(SOLVERS, 2):
         np.testing.assert_allclose(xs[first], xs[second], atol=1e-6)
     check_kkt(A, b, D, f, xs["daqp"])
+
+
+# Cost: the same problem through faster paths -------------------------------------------------
+
+
+def well_conditioned(rng: np.random.Generator, m: int, k: int, condition: float) -> np.ndarray:
+    """``(m, k)`` with singular values spread from 1 down to ``1 / condition``."""
+    left, _ = np.linalg.qr(rng.normal(size=(m, min(m, k))))
+    right, _ = np.linalg.qr(rng.normal(size=(k, min(m, k))))
+    return left @ np.diag(np.geomspace(1.0, 1.0 / condition, min(m, k))) @ right.T
+
+
+@pytest.mark.parametrize(("m", "k"), [(45, 104), (12, 30), (47, 33), (20, 14)])
+def test_gram_svd_is_the_svd_of_a_well_conditioned_level(m, k):
+    """Singular values and the kept subspace as the SVD's; a complete orthonormal V.
+
+    Within ε κ² (κ = 100): squaring the condition is what the Gram matrix costs."""
+    rng = np.random.default_rng(m * k)
+    A = well_conditioned(rng, m, k, 100.0)
+    decomposition = (prioritized._gram_svd if m <= k else prioritized._gram_svd_tall)(A)
+    assert decomposition is not None
+    U, sigma, V = decomposition
+    np.testing.assert_allclose(sigma, np.linalg.svd(A, compute_uv=False), rtol=1e-11)
+    np.testing.assert_allclose(V.T @ V, np.eye(V.shape[1]), atol=1e-11)
+    r = min(m, k)
+    np.testing.assert_allclose(U[:, :r] @ np.diag(sigma) @ V[:, :r].T, A, atol=1e-12)
+    if m < k:
+        np.testing.assert_allclose(A @ V[:, m:], 0.0, atol=1e-12)
+
+
+def test_gram_svd_declines_an_ill_conditioned_level():
+    rng = np.random.default_rng(4)
+    A = well_conditioned(rng, 10, 25, 10 * GRAM_CONDITION_LIMIT)
+    assert prioritized._gram_svd(A) is None
+    assert prioritized._gram_svd_tall(A.T) is None
+
+
+@pytest.mark.parametrize(("k", "m"), [(104, 59), (20, 6), (7, 6), (5, 1)])
+def test_orthogonal_complement_completes_an_orthonormal_basis(k, m):
+    rng = np.random.default_rng(k + m)
+    V, _ = np.linalg.qr(rng.normal(size=(k, m)))
+    complement = prioritized._orthogonal_complement(V)
+    basis = np.hstack([V, complement])
+    np.testing.assert_allclose(basis.T @ basis, np.eye(k), atol=1e-14)
+
+
+def test_daqp_is_called_as_qpsolvers_calls_it():
+    """The direct call of solve_qp_bounded returns qpsolvers' DAQP solution bit for bit."""
+    rng = np.random.default_rng(5)
+    n = 30
+    D, f = feasible_inequalities(rng, n, 40, margin=0.1)
+    problem = qpsolvers.Problem(np.diag(rng.uniform(1e-12, 1.0, n)), rng.normal(size=n), -D, f)
+    settings = {"primal_tol": 1e-9, "eta_prox": 1e-10}
+    direct = solve_qp_bounded(problem, "daqp", **settings)
+    through = qpsolvers.solve_problem(problem, solver="daqp", iter_limit=1000, **settings)
+    assert direct.found and through.found
+    np.testing.assert_array_equal(direct.x, through.x)
+    np.testing.assert_array_equal(direct.z, through.z)
+    assert direct.obj == through.obj
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_rows_given_as_a_level_solve_as_the_objectives(seed):
+    rng = np.random.default_rng(seed)
+    n = 12
+    first = [objective("a", rng.normal(size=(3, n)), rng.normal(size=3), 4.0)]
+    second = [
+        objective("b", rng.normal(size=(4, n)), rng.normal(size=4), 2.0),
+        objective("c", rng.normal(size=(5, n)), rng.normal(size=5)),
+    ]
+    D, f = feasible_inequalities(rng, n, 10, margin=0.1)
+    rows = [Level(tuple(o.name for o in level), *weighted_rows(level)) for level in (first, second)]
+    as_objectives = solve_prioritized([first, second], D, f)
+    as_rows = solve_prioritized(rows, D, f)
+    np.testing.assert_allclose(as_rows.x, as_objectives.x, rtol=1e-12, atol=1e-12)
+    assert [level.names for level in as_rows.levels] == [("a",), ("b", "c")]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_null_space_part_the_levels_below_cannot_see_changes_nothing(seed, monkeypatch):
+    """Equations of motion, then a level on q̈ alone and one on λ, as in the controller: the
+    motionless forces kept apart (the q̈ level leaves them out of its SVD) or not, the same
+    solution."""
+    rng = np.random.default_rng(seed)
+    nu, nv, nl = 6, 8, 12
+    n = nu + nv + nl
+    S_T = np.vstack([np.zeros((nv - nu, nu)), np.eye(nu)])
+    M = well_conditioned(rng, nv, nv, 3.0)
+    M = M @ M.T + np.eye(nv)
+    G = rng.normal(size=(nv, nl))
+    dynamics = np.hstack([S_T, -M, G])
+    # (τ, 0, λ) with Sᵀ τ + G λ = 0: λ in null(G_root), τ = −G_joints λ.
+    balanced = scipy.linalg.null_space(G[: nv - nu])
+    motionless, _ = np.linalg.qr(
+        np.vstack([-G[nv - nu :] @ balanced, np.zeros((nv, balanced.shape[1])), balanced])
+    )
+    on_acceleration = np.zeros((5, n))
+    on_acceleration[:, nu : nu + nv] = rng.normal(size=(5, nv))
+    targets, bias = rng.normal(size=5), rng.normal(size=nv)
+    forces = np.hstack([np.zeros((nl, nu + nv)), np.eye(nl)])
+    D, f = forces.copy(), np.zeros(nl)  # λ ≥ 0
+    gram_results = []
+    real_gram_svd = prioritized._gram_svd
+
+    def spy(*args):
+        gram_results.append(real_gram_svd(*args))
+        return gram_results[-1]
+
+    monkeypatch.setattr(prioritized, "_gram_svd", spy)
+
+    def solve(part):
+        levels = [
+            Level(("dynamics",), dynamics, bias, well_conditioned=True, null_space_part=part),
+            Level(("pose",), on_acceleration, targets),
+            Level(("forces",), forces, np.zeros(nl)),
+        ]
+        return solve_prioritized(levels, D, f, gain_bound=[1e15, 1e4, 1e4])
+
+    without, with_part = solve(None), solve(motionless)
+    assert all(result is not None for result in gram_results)
+    np.testing.assert_allclose(with_part.x, without.x, rtol=1e-8, atol=1e-8)
+    assert [lv.rank for lv in with_part.levels] == [lv.rank for lv in without.levels]
+    assert with_part.found and without.found
 
 
 # Reports and validation ----------------------------------------------------------------------

@@ -101,6 +101,34 @@ iterations of each of its 1000 outer ones: ~24 s per call, minutes per tick.
 The equations of motion are not special: as de Lasa 2010 (§8.2, after eq.
 36) recommend, give them as the top-priority level rather than as
 equality constraints.
+
+Blocks. ``C̄`` is kept as orthonormal blocks, mutually orthogonal, side by
+side. A level whose rows ``A`` are exactly zero on a block (``A B = 0``
+bit for bit) cannot see it: those directions would be exactly null in the
+SVD of ``A C̄``, so they are left out of it and given, in the QP, the
+curvature of the directions without gain (which any orthonormal basis of
+them gets alike: the QP is the same problem). The first level may name a
+part of its null space to keep as a block of its own
+(:attr:`Level.null_space_part`); the prioritized controller names the
+contact forces that torques balance without any motion, which every
+objective on ``q̈`` is blind to, so that the SVDs of those levels have
+``nλ − 6`` fewer columns and the CM-height level below a pose that fixes
+every ``q̈`` sees nothing at all.
+
+Cost. A level's SVD, its QP and a few products make the solve; at the sizes
+of a humanoid (``Ā`` up to 45 × 104) LAPACK's small-matrix routines and
+each call's dispatch dominate. A wide level known to have independent,
+well-conditioned rows (:attr:`Level.well_conditioned`: the equations of
+motion, ``M ≻ 0``, condition ~100) takes its SVD from the eigendecomposition
+of ``Ā Āᵀ`` and its null space from one Householder QR; a tall one
+(``m ≥ k ≥ 8``) tries ``Āᵀ Ā``. Squaring loses ``ε κ²`` relative in the
+smallest singular value, so both are used only up to ``κ =``
+:data:`GRAM_CONDITION_LIMIT` (the SVD otherwise). DAQP is called directly
+with the arguments ``qpsolvers`` would give it (:func:`solve_qp_bounded`).
+None of this changes the problem, only rounding: its QPs are fed the same
+data up to it (their proximal-point iterations make the solution depend on
+the coordinates, so ``z = Vᵀ w`` stays the SVD's, up to rotations of
+directions that share one curvature).
 """
 
 from __future__ import annotations

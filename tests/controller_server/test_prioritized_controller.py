@@ -10,6 +10,12 @@ from hypothesis import strategies as st
 
 from controller_server.controllers import ControlInput, create_controller
 from controller_server.controllers.prioritized import friction_cone_basis
+from controller_server.controllers.prioritized_layout import (
+    LayoutIndex,
+    PrioritizedLayout,
+    joint_limit_rows,
+)
+from controller_server.dynamics import compute_dynamics_terms
 from controller_server.errors import InvalidParams
 from controller_server.features.setpoint import target_acceleration
 from controller_server.models import BUILTIN_MODELS, load_robot_model
@@ -271,3 +277,52 @@ def test_a_new_cm_height_moves_the_cm_when_ranked_with_the_momentum():
     rate = "linear_momentum_rate_achieved"
     # Lower the CM: the ground pushes less than before (L̇_z smaller).
     assert lowered.diagnostics[rate][2] < default.diagnostics[rate][2] - 1.0
+
+
+def layout_at(robot, seed: int):
+    """The controller's layout at a near-standing state, every contact planted and loaded."""
+    q, v = near_standing_state(robot, seed)
+    data = robot.model.createData()
+    terms = compute_dynamics_terms(robot, data, q, v)
+    contacts = (True,) * len(robot.contacts)
+    mus = tuple(c.friction_coefficient for c in robot.contacts)
+    return q, terms, PrioritizedLayout(LayoutIndex(robot), terms, contacts, contacts, mus, 0.0, 1.0)
+
+
+def test_motionless_forces_move_nothing(robot):
+    """(τ, 0, λ) with Sᵀ τ + J_cᵀ V λ = 0: orthonormal, exactly zero on q̈, no generalized force."""
+    _, terms, layout = layout_at(robot, 3)
+    basis = layout.motionless_forces()
+    assert basis.shape == (layout.size, layout.nl - 6)
+    np.testing.assert_allclose(basis.T @ basis, np.eye(basis.shape[1]), atol=1e-12)
+    assert not basis[layout.acceleration].any()
+    dynamics = layout.equations_of_motion(terms).A
+    np.testing.assert_allclose(dynamics @ basis, 0.0, atol=1e-10 * np.abs(dynamics).max())
+
+
+def test_joint_limit_rows_are_the_joints_at_their_limits(robot):
+    """Vectorized rows against the definition, joint by joint (de Lasa eq. 27); ball joints
+    (all of the thesis humanoid's and the dino's) have none."""
+    model = robot.model
+    rng = np.random.default_rng(1)
+    q = pin.neutral(model)
+    scalar = [joint for joint in model.joints[2:] if joint.nq == 1]
+    for joint in scalar:  # a third below, a third above, a third inside
+        lower, upper = (
+            model.lowerPositionLimit[joint.idx_q],
+            model.upperPositionLimit[joint.idx_q],
+        )
+        q[joint.idx_q] = rng.choice([lower - 0.1, upper + 0.1, 0.5 * (lower + upper)])
+    nu = model.nv - 6
+    rows, offsets = joint_limit_rows(robot, q, 2 * model.nv, nu)
+    expected = []
+    for joint in scalar:
+        value = q[joint.idx_q]
+        if value <= model.lowerPositionLimit[joint.idx_q]:
+            expected.append((nu + joint.idx_v, 1.0))
+        elif value >= model.upperPositionLimit[joint.idx_q]:
+            expected.append((nu + joint.idx_v, -1.0))
+    assert bool(expected) == bool(scalar)
+    assert len(offsets) == len(expected) and not offsets.any()
+    for row, (column, sign) in zip(rows, expected, strict=True):
+        assert row[column] == sign and np.count_nonzero(row) == 1
