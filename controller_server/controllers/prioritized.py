@@ -561,11 +561,12 @@ class PrioritizedController(Controller):
     ) -> ControlOutput:
         p, robot = self._params, self.robot
         x = solution.x
+        index = self._index
         torque_unclipped = x[layout.torque]
-        torque = np.clip(torque_unclipped, -robot.torque_limit, robot.torque_limit)
-        forces = np.zeros((robot.num_contact_points, 3))
+        torque = np.clip(torque_unclipped, index.lower_torque_limit, index.torque_limit)
+        forces = np.zeros((index.owner.size, 3))
         forces[layout.force_point_indices] = layout.point_forces(x)
-        wrenches = wrenches_from_point_forces(terms, forces, self._index.counts)
+        wrenches = wrenches_from_point_forces(terms, forces, index.counts)
         # The acceleration τ and f really produce (equal to x's q̈ when eq. 22 holds).
         generalized = layout.contact_force_map @ x[layout.force]
         generalized[NUM_ROOT_DOFS:] += torque
@@ -582,7 +583,8 @@ class PrioritizedController(Controller):
             p["ground_height"],
         )
         support = compute_support_equalities(terms, flags)
-        constraint_residual = float(np.linalg.norm(support.C @ acceleration - support.d))
+        support_error = support.C @ acceleration - support.d
+        constraint_residual = math.sqrt(float(support_error @ support_error))
         dynamics = objectives["dynamics"].objective
         diagnostics = {
             "position_com_in_world": terms.position_com_in_world,

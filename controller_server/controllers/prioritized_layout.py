@@ -56,6 +56,7 @@ class LayoutIndex:
         counts: Points per contact.
         S_T: ``(nv, nu)``: Sᵀ, actuated torques into generalized forces.
         torque_limit: ``(nu,)`` torque limits (N·m; ``inf`` where unbounded).
+        lower_torque_limit: ``−torque_limit``.
         bounded_torques: Indices of the finite torque limits.
     """
 
@@ -67,6 +68,7 @@ class LayoutIndex:
         self.owner = np.repeat(np.arange(len(self.counts)), self.counts)
         self.S_T = np.vstack([np.zeros((NUM_ROOT_DOFS, self.nu)), np.eye(self.nu)])
         self.torque_limit = np.asarray(robot.torque_limit, dtype=float)
+        self.lower_torque_limit = -self.torque_limit
         self.bounded_torques = np.flatnonzero(np.isfinite(self.torque_limit))
         scalar = [joint for joint in model.joints[2:] if joint.nq == 1]
         self._limit_q = np.array([joint.idx_q for joint in scalar], dtype=int)

@@ -504,7 +504,7 @@ def solve_prioritized(
             stopped = True
 
     x = np.zeros(n) if d_bar is None else d_bar
-    violation = max(0.0, -float(np.min(D @ x + f))) if D.shape[0] else 0.0
+    violation = max(0.0, -float((D @ x + f).min())) if D.shape[0] else 0.0
     return PrioritizedSolution(
         found=not (infeasible or failed) and violation <= feasibility_tolerance,
         x=x,
@@ -811,10 +811,10 @@ def _solve_level(
     if D_seen.shape[0]:
         D_C_bar_w = D_seen @ w
         new_slack = slack + D_C_bar_w
-        if not np.min(new_slack) >= -feasibility_tolerance:  # violated, or NaN
+        if not new_slack.min() >= -feasibility_tolerance:  # violated, or NaN
             used_qp = True
-            magnitude = float(np.max(np.abs(np.concatenate([slack, D_C_bar_w]))))
-            limit = qp_data_limit(feasibility_tolerance)
+            magnitude = max(float(np.abs(slack).max()), float(np.abs(D_C_bar_w).max()))
+            limit = feasibility_tolerance / _EPSILON  # qp_data_limit
             if not magnitude <= limit:  # also NaN
                 detail = (
                     f"no QP: inequality terms |D x + f| reach {magnitude:.3g}, beyond {limit:.3g} "
@@ -848,7 +848,7 @@ def _solve_level(
                 if z_qp is None:
                     continue
                 new_slack = slack + D_C_bar_V @ z_qp
-                if np.min(new_slack) >= -feasibility_tolerance:  # also rejects NaN
+                if new_slack.min() >= -feasibility_tolerance:  # also rejects NaN
                     w = V @ z_qp[:k]
                     w_unseen = z_qp[k:] if dimension > k else None
                     break
@@ -1019,7 +1019,7 @@ def _solve_qp(
             info = solution.extras.get("info") if isinstance(solution.extras, dict) else None
             closest = info is not None and str(info.status).endswith("CLOSEST_PRIMAL_FEASIBLE")
             z = solution.x
-            if (solution.found or closest) and z is not None and np.all(np.isfinite(z)):
+            if (solution.found or closest) and z is not None and np.isfinite(z).all():
                 return z
     return None
 
