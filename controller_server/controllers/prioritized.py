@@ -375,7 +375,15 @@ class PrioritizedController(Controller):
                 f"the equations of motion could not be solved ({top.status}, QP solver "
                 f"{p['qp_solver']}{': ' + top.detail if top.detail else ''}); no command"
             )
-        return self._output(terms, layout, flags, objectives, desired_rates, solution)
+        return self._output(
+            terms,
+            layout,
+            flags,
+            objectives,
+            desired_rates,
+            solution,
+            control_input.want_diagnostics,
+        )
 
     def _planted(self) -> tuple[bool, ...]:
         """Per contact, whether ``support_mask`` allows it (cached per parameter value)."""
@@ -558,8 +566,8 @@ class PrioritizedController(Controller):
         objectives: dict[str, _Term],
         desired_rates: dict[str, np.ndarray],
         solution: PrioritizedSolution,
+        want_diagnostics: bool = True,
     ) -> ControlOutput:
-        p, robot = self._params, self.robot
         x = solution.x
         index = self._index
         torque_unclipped = x[layout.torque]
@@ -574,6 +582,41 @@ class PrioritizedController(Controller):
         _, _, acceleration, info = lapack.dgesv(terms.mass_matrix, generalized - terms.bias_forces)
         if info:
             raise np.linalg.LinAlgError("Singular matrix")
+        diagnostics = None
+        if want_diagnostics:
+            diagnostics = self._diagnostics(
+                terms,
+                layout,
+                flags,
+                objectives,
+                desired_rates,
+                solution,
+                acceleration,
+                wrenches,
+                torque_unclipped,
+            )
+        return ControlOutput(
+            acceleration=acceleration,
+            joint_torque=torque,
+            contact_force_in_world=forces,
+            contact_wrench_in_world=wrenches,
+            diagnostics=diagnostics,
+        )
+
+    def _diagnostics(
+        self,
+        terms: DynamicsTerms,
+        layout: PrioritizedLayout,
+        flags: tuple[bool, ...],
+        objectives: dict[str, _Term],
+        desired_rates: dict[str, np.ndarray],
+        solution: PrioritizedSolution,
+        acceleration: np.ndarray,
+        wrenches: np.ndarray,
+        torque_unclipped: np.ndarray,
+    ) -> dict[str, Any]:
+        """The tick's diagnostics (only on ticks that send them)."""
+        p, robot, x = self._params, self.robot, solution.x
         momentum = terms.momentum
         cop, cmp_ = ground_reference_points(
             terms.position_contact_frames_in_world,
@@ -586,7 +629,7 @@ class PrioritizedController(Controller):
         support_error = support.C @ acceleration - support.d
         constraint_residual = math.sqrt(float(support_error @ support_error))
         dynamics = objectives["dynamics"].objective
-        diagnostics = {
+        return {
             "position_com_in_world": terms.position_com_in_world,
             "velocity_com_in_world": momentum.linear_momentum / terms.total_mass,
             "linear_momentum": momentum.linear_momentum,
@@ -623,13 +666,6 @@ class PrioritizedController(Controller):
                 "inequality_violation": solution.inequality_violation,
             },
         }
-        return ControlOutput(
-            acceleration=acceleration,
-            joint_torque=torque,
-            contact_force_in_world=forces,
-            contact_wrench_in_world=wrenches,
-            diagnostics=diagnostics,
-        )
 
 
 def _residual(term: _Term, x: np.ndarray) -> float:

@@ -326,3 +326,20 @@ def test_joint_limit_rows_are_the_joints_at_their_limits(robot):
     assert len(offsets) == len(expected) and not offsets.any()
     for row, (column, sign) in zip(rows, expected, strict=True):
         assert row[column] == sign and np.count_nonzero(row) == 1
+
+
+def test_a_tick_without_diagnostics_commands_the_same(robot):
+    """Ticks that send no diagnostics skip them, and nothing else."""
+    q, v = near_standing_state(robot, 4)
+    controller = create_controller("prioritized", robot, {"contact_distance": 1.0})
+    flags = (True,) * len(robot.contacts)
+    full = controller.compute(ControlInput(0.0, q, v, flags))
+    bare = controller.compute(ControlInput(0.0, q, v, flags, want_diagnostics=False))
+    assert full.diagnostics is not None and bare.diagnostics is None
+    for name in (
+        "acceleration",
+        "joint_torque",
+        "contact_force_in_world",
+        "contact_wrench_in_world",
+    ):
+        np.testing.assert_array_equal(getattr(bare, name), getattr(full, name))
