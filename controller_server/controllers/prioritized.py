@@ -102,14 +102,17 @@ EXACT_GAIN_BOUND = 1e15
 class _Term(NamedTuple):
     """An objective over one block of ``x = [τ, q̈, λ]`` (its ``A`` has the block's columns).
 
-    ``weight`` is the objective's weight when every row has it (``None`` otherwise), and
-    ``active`` whether any row has a positive one.
+    ``weight`` is the objective's weight when every row has it (``None`` otherwise),
+    ``active`` whether any row has a positive one, and ``row_basis`` orthonormal columns
+    holding those of ``A`` when its rows span fewer dimensions than they are
+    (:attr:`~controller_server.solvers.prioritized.Level.row_basis`).
     """
 
     objective: Objective
     columns: slice
     weight: float | None
     active: bool
+    row_basis: np.ndarray | None = None
 
 
 OBJECTIVES: dict[str, tuple[int, float, str]] = {
@@ -497,7 +500,13 @@ class PrioritizedController(Controller):
         objectives = {
             "dynamics": _Term(layout.equations_of_motion(terms), slice(0, layout.size), 1.0, True),
             **{
-                o.name: _Term(o, layout.acceleration, weight, weight > 0)
+                o.name: _Term(
+                    o,
+                    layout.acceleration,
+                    weight,
+                    weight > 0,
+                    layout.contact_row_basis() if o.name == "contact" else None,
+                )
                 for o, weight in ((o, float(p[f"weight_{o.name}"])) for o in on_acceleration)
             },
             "forces": self._least_forces(layout),
@@ -691,7 +700,7 @@ def _normalized_level(
     ``√rank``, is singular) rather than on singular values in mixed units.
     """
     squared = 0.0
-    for objective, _, weight, _ in terms:
+    for objective, _, weight, *_ in terms:
         A = objective.A
         if weight is None:
             squared += float(objective.weight @ (A * A).sum(axis=1))
@@ -702,7 +711,7 @@ def _normalized_level(
     A_level = np.zeros((rows, size))
     b_level = np.empty(rows)
     start = 0
-    for objective, columns, weight, _ in terms:
+    for objective, columns, weight, *_ in terms:
         end = start + objective.b.size
         if weight is None:
             root_weight = np.sqrt(objective.weight / scale**2 if scale > 0.0 else objective.weight)
@@ -719,4 +728,23 @@ def _normalized_level(
         b_level,
         well_conditioned,
         null_space_part,
+        _row_basis(terms, rows),
     )
+
+
+def _row_basis(terms: Sequence[_Term], rows: int) -> np.ndarray | None:
+    """The level's row basis: block diagonal of its objectives' (all rows for those without)."""
+    if all(term.row_basis is None for term in terms):
+        return None
+    if len(terms) == 1:
+        return terms[0].row_basis
+    bases = [
+        np.eye(term.objective.b.size) if term.row_basis is None else term.row_basis
+        for term in terms
+    ]
+    basis = np.zeros((rows, sum(part.shape[1] for part in bases)))
+    row = column = 0
+    for part in bases:
+        basis[row : row + part.shape[0], column : column + part.shape[1]] = part
+        row, column = row + part.shape[0], column + part.shape[1]
+    return basis

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from functools import cache
 
 import numpy as np
 from scipy.linalg import lapack
@@ -158,6 +159,9 @@ class PrioritizedLayout:
         self.point_jacobian = jacobian[planted_points].reshape(-1, nv)
         self.point_drift = drift[planted_points].reshape(-1)
         self.point_positions = positions[planted_points]
+        self._contact_row_basis = _sole_row_basis(
+            self.point_positions, [index.counts[c] for c, on in enumerate(planted) if on]
+        )
         supporting = index.points_of(tuple(supports))
         #: Supporting points' positions ``(k, 3)``: the base of support.
         self.support_positions = positions[supporting]
@@ -196,6 +200,21 @@ class PrioritizedLayout:
         np.negative(terms.mass_matrix, out=A[:, self.acceleration])
         A[:, self.force] = self.contact_force_map
         return Objective("dynamics", A, terms.bias_forces, np.ones(self.nv))
+
+    def contact_row_basis(self) -> np.ndarray | None:
+        """``(3s, 6c)`` orthonormal columns holding those of the planted points' Jacobian.
+
+        The points of one sole move with it: the rows of point ``i`` are
+        ``[I, −[rᵢ]×] J_frame`` (``rᵢ`` its offset from the frame origin, App. C), so the
+        ``contact`` rows of ``c`` planted soles span at most ``6c`` dimensions. Per sole the
+        columns of the stacked ``[I, −[rᵢ]×]`` span what ``[1, −[dᵢ]×] / …`` spans, ``dᵢ``
+        the points' offsets from their centroid, whose two halves are orthogonal: ``1/√k``
+        per point, and ``−[dᵢ]×`` made orthonormal through the Cholesky factor of its Gram
+        ``Σ |dᵢ|² I − dᵢ dᵢᵀ`` (the points' second moment, well conditioned for a sole).
+        ``None`` when a sole's points are fewer than three or on a line, or their counts
+        differ (then the solver takes all the rows).
+        """
+        return self._contact_row_basis
 
     def motionless_forces(self) -> np.ndarray:
         """``(size, f)`` orthonormal basis of ``{x = (τ, 0, λ) : Sᵀ τ + J_cᵀ V λ = 0}``.
@@ -285,6 +304,63 @@ class PrioritizedLayout:
             start += 2 * count
         D[start + np.arange(limit_v.size), nu + limit_v] = limit_sign
         return D, f
+
+
+@cache
+def _stacked_identity(points: int) -> np.ndarray:
+    """``[I; …; I] / √k``: orthonormal translations of ``k`` points (read-only)."""
+    stacked = np.tile(np.eye(3), (points, 1)) / math.sqrt(points)
+    stacked.flags.writeable = False
+    return stacked
+
+
+_CROSS_INDEX = np.array([[0, 2, 1], [2, 0, 0], [1, 0, 0]])
+_CROSS_SIGN = np.array([[0.0, 1.0, -1.0], [-1.0, 0.0, 1.0], [1.0, -1.0, 0.0]])
+"""``−[d]× = d[_CROSS_INDEX] * _CROSS_SIGN``."""
+
+
+def _sole_row_basis(positions: np.ndarray, counts: list[int]) -> np.ndarray | None:
+    """:meth:`PrioritizedLayout.contact_row_basis` of soles with ``counts`` points each."""
+    if not counts or min(counts) < 3 or max(counts) != min(counts):
+        return None
+    soles, points = len(counts), counts[0]
+    offsets = positions.reshape(soles, points, 3)
+    offsets = offsets - offsets.mean(axis=1, keepdims=True)
+    moments = (offsets.transpose(0, 2, 1) @ offsets).tolist()
+    # Per sole, L⁻ᵀ of gram = Σ |d|² I − d dᵀ = L Lᵀ (3 × 3, by hand).
+    inverse_transposes = []
+    for (a, b, c), (_, e, f), (_, _, i) in moments:
+        trace = a + e + i
+        g00, g01, g02, g11, g12, g22 = trace - a, -b, -c, trace - e, -f, trace - i
+        if not g00 > 0.0:
+            return None
+        l00 = math.sqrt(g00)
+        l10, l20 = g01 / l00, g02 / l00
+        d11 = g11 - l10 * l10
+        if not d11 > 1e-12 * trace:
+            return None
+        l11 = math.sqrt(d11)
+        l21 = (g12 - l20 * l10) / l11
+        d22 = g22 - l20 * l20 - l21 * l21
+        if not d22 > 1e-12 * trace:  # points on a line: fewer than 6 directions
+            return None
+        l22 = math.sqrt(d22)
+        # L⁻¹ (lower), then its transpose.
+        m00, m11, m22 = 1.0 / l00, 1.0 / l11, 1.0 / l22
+        m10 = -l10 * m00 * m11
+        m21 = -l21 * m11 * m22
+        m20 = -(l20 * m00 + l21 * m10) * m22
+        inverse_transposes.append([[m00, m10, m20], [0.0, m11, m21], [0.0, 0.0, m22]])
+    cross = offsets[..., _CROSS_INDEX] * _CROSS_SIGN  # (soles, points, 3, 3): −[d]×
+    rotations = (cross @ np.array(inverse_transposes)[:, None]).reshape(soles, 3 * points, 3)
+    rows = 3 * points
+    basis = np.zeros((rows * soles, 6 * soles))
+    translations = _stacked_identity(points)
+    for sole in range(soles):
+        block = basis[rows * sole : rows * (sole + 1)]
+        block[:, 6 * sole : 6 * sole + 3] = translations
+        block[:, 6 * sole + 3 : 6 * sole + 6] = rotations[sole]
+    return basis
 
 
 def joint_limit_rows(

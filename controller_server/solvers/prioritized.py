@@ -285,6 +285,11 @@ class Level:
             ``well_conditioned`` first level: kept as a block of ``C̄`` of its own (see the
             module docstring, "Blocks"), so that the levels below whose rows are exactly
             zero on it leave it out of their SVD. Ignored when the level's SVD is taken.
+        row_basis: ``(m, r)`` orthonormal columns whose span holds every column of ``A``
+            (rows that combine fewer: the points of a rigid sole). The level is solved as
+            ``Pᵀ A x ≈ Pᵀ b``, which has the same minimizers, singular values and right
+            singular vectors, from ``r`` rows (by :func:`_gram_svd` when its condition
+            allows); its rounding floor and reported residual are those of all ``m`` rows.
     """
 
     names: tuple[str, ...]
@@ -292,6 +297,7 @@ class Level:
     b: np.ndarray
     well_conditioned: bool = False
     null_space_part: np.ndarray | None = None
+    row_basis: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -425,7 +431,9 @@ def solve_prioritized(
     clock = _QPClock(qp_time_budget_s)
     stopped = infeasible = failed = solved_any = False
     for level_index, level in enumerate(stacked):
-        names, A = level.names, level.A
+        names, A, b = level.names, level.A, level.b
+        if level.row_basis is not None:  # the same least squares in r ≤ m rows
+            A, b = level.row_basis.T @ A, level.row_basis.T @ b
         if stopped:
             reports.append(LevelReport(names, "not reached", 0.0, 0, 0, 0.0, 0.0, False))
             continue
@@ -434,7 +442,7 @@ def solve_prioritized(
             reports.append(LevelReport(names, "empty", 0.0, 0, dimension, 0.0, 0.0, False))
             continue
         seen = _Seen.of(A, D, blocks)  # Algorithm 1, line 3: Ā = A C̄, block by block
-        b_bar = level.b if d_bar is None else level.b - A @ d_bar  # line 4
+        b_bar = b if d_bar is None else b - A @ d_bar  # line 4
         step = _solve_level(
             seen,
             b_bar,
@@ -445,7 +453,8 @@ def solve_prioritized(
             feasibility_tolerance,
             persist=level_index == 0,
             clock=clock,
-            gram=level.well_conditioned,
+            gram=level.well_conditioned or level.row_basis is not None,
+            rows=level.A.shape[0],
             null_space_part=level.null_space_part if blocks is None else None,
         )
         if step.w is None and level_index > 0 and solved_any:
@@ -758,6 +767,7 @@ def _solve_level(
     clock: _QPClock,
     gram: bool = False,
     null_space_part: np.ndarray | None = None,
+    rows: int | None = None,
 ) -> _LevelStep:
     """Algorithm 1, lines 5–6 and ``null(Ā)``, from one SVD of ``Ā``.
 
@@ -765,7 +775,9 @@ def _solve_level(
     on the others it is exactly zero, like the directions without a singular value. With
     ``gram`` (a level known to be well conditioned), the SVD of a wide ``Ā`` comes from
     :func:`_gram_svd` when its condition allows, and ``null_space_part`` becomes a null
-    part of its own; a tall ``Ā`` tries :func:`_gram_svd_tall` first.
+    part of its own; a tall ``Ā`` tries :func:`_gram_svd_tall` first. ``rows`` counts the
+    level's rows before a :attr:`Level.row_basis` reduced them (the rounding floor is the
+    SVD's of all of them).
     """
     A_bar, D_seen, D_unseen = seen.A_bar, seen.D_seen, seen.D_unseen
     m, k = A_bar.shape
@@ -780,14 +792,16 @@ def _solve_level(
         given = 0 if null_space_part is None else null_space_part.shape[1]
     elif k:
         # Thin SVD, except for wide Ā, whose null space needs all k rows of Vᵀ.
-        U, sigma, Vt = np.linalg.svd(A_bar, full_matrices=m < k)
+        U, sigma, Vt, info = _lapack.dgesdd(A_bar, full_matrices=int(m < k))
+        if info:  # as numpy.linalg.svd
+            raise np.linalg.LinAlgError("SVD did not converge")
         V = Vt.T
     else:  # the level sees nothing of what is left
         U, sigma, V = np.zeros((m, 0)), np.zeros(0), np.zeros((0, 0))
     # σ sorted descending, as floats: the counts below are of a prefix.
     singular_values = sigma.tolist()
     sigma_max = singular_values[0] if singular_values else 0.0
-    rounding_floor = sigma_max * max(m, dimension) * _EPSILON
+    rounding_floor = sigma_max * max(m if rows is None else rows, dimension) * _EPSILON
     tolerance = max(1.0 / gain_bound, rounding_floor)
     rank = _prefix(singular_values, lambda s: s >= tolerance)
     # Singular values at the rounding floor are noise, not small: like the directions without
@@ -1040,6 +1054,11 @@ def _stack_level(
             )
         if check_finite and not (np.isfinite(A).all() and np.isfinite(b).all()):
             raise ValueError(f"level {level.names} has non-finite A or b")
+        basis = level.row_basis
+        if basis is not None and (basis.ndim != 2 or basis.shape[0] != A.shape[0]):
+            raise ValueError(
+                f"level {level.names} needs a row basis ({A.shape[0]}, r), got {basis.shape}"
+            )
         return level if A is level.A and b is level.b else replace(level, A=A, b=b)
     objectives = (level,) if isinstance(level, Objective) else tuple(level)
     names = tuple(objective.name for objective in objectives)
