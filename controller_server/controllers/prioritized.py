@@ -336,10 +336,18 @@ class PrioritizedController(Controller):
         )
         objectives, desired_rates = self._objectives(control_input, terms, layout)
         D, f = layout.inequalities(control_input.q, p["non_penetration"])
-        if not all(
-            np.isfinite(term.objective.A).all() and np.isfinite(term.objective.b).all()
-            for term in objectives.values()
-        ) or not (np.isfinite(D).all() and np.isfinite(f).all()):
+        # One sum first: NaN and ±inf propagate through it; only a non-finite (or overflowing)
+        # sum looks at each array.
+        total = float(D.sum()) + float(f.sum())
+        for term in objectives.values():
+            total += float(term.objective.A.sum()) + float(term.objective.b.sum())
+        if not math.isfinite(total) and (
+            not all(
+                np.isfinite(term.objective.A).all() and np.isfinite(term.objective.b).all()
+                for term in objectives.values()
+            )
+            or not (np.isfinite(D).all() and np.isfinite(f).all())
+        ):
             not_finite = [
                 name
                 for name, term in objectives.items()
@@ -370,7 +378,13 @@ class PrioritizedController(Controller):
         # would let lower levels bend the dynamics of a heavy robot.
         bounds = [EXACT_GAIN_BOUND] + [p["gain_bound"]] * (len(levels) - 1)
         solution = solve_prioritized(
-            levels, D, f, gain_bound=bounds, qp_solver=p["qp_solver"], check_finite=False
+            levels,
+            D,
+            f,
+            gain_bound=bounds,
+            qp_solver=p["qp_solver"],
+            check_finite=False,
+            residuals=control_input.want_diagnostics,
         )
         top = solution.levels[0]
         if top.status != "solved":

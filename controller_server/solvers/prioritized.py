@@ -372,6 +372,7 @@ def solve_prioritized(
     feasibility_tolerance: float = 1e-7,
     qp_time_budget_s: float = QP_TIME_BUDGET_S,
     check_finite: bool = True,
+    residuals: bool = True,
 ) -> PrioritizedSolution:
     """Solve the prioritized problem of de Lasa 2010, eq. 17, by Algorithm 1.
 
@@ -394,6 +395,8 @@ def solve_prioritized(
             QP solves took this long (s). See :data:`QP_TIME_BUDGET_S`.
         check_finite: Refuse non-finite ``A`` or ``b`` of a :class:`Level` (``False``: the
             caller has checked them).
+        residuals: Report each level's residual (``False``: NaN, for a caller that will not
+            read them).
 
     Returns:
         The solution and per-level reports. Never raises for infeasible inequalities,
@@ -520,7 +523,7 @@ def solve_prioritized(
         levels=tuple(
             report
             if level.A.shape[0] == 0
-            else replace(report, residual=_norm(level.A @ x - level.b))
+            else replace(report, residual=_norm(level.A @ x - level.b) if residuals else math.nan)
             for report, level in zip(reports, stacked, strict=True)
         ),
         inequality_violation=violation,
