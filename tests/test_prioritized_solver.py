@@ -504,6 +504,29 @@ def test_a_null_space_part_the_levels_below_cannot_see_changes_nothing(seed, mon
     assert with_part.found and without.found
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_a_row_basis_solves_the_same_least_squares(seed):
+    """24 rows of rank 12 (two rigid soles) solved in their 12-dimensional span: the same x,
+    ranks and residuals, under inequalities and a level below."""
+    rng = np.random.default_rng(seed)
+    n = 20
+    span, _ = np.linalg.qr(rng.normal(size=(24, 12)))
+    A = span @ rng.normal(size=(12, n))
+    b = rng.normal(size=24)  # partly outside the span: a residual no x removes
+    below = rng.normal(size=(n, n)), rng.normal(size=n)
+    D, f = feasible_inequalities(rng, n, 15, margin=0.1)
+
+    def solve(basis):
+        levels = [Level(("soles",), A, b, row_basis=basis), Level(("below",), *below)]
+        return solve_prioritized(levels, D, f, gain_bound=1e4)
+
+    full, reduced = solve(None), solve(span)
+    np.testing.assert_allclose(reduced.x, full.x, rtol=1e-9, atol=1e-9)
+    for mine, theirs in zip(reduced.levels, full.levels, strict=True):
+        assert (mine.rank, mine.null_space_dimension) == (theirs.rank, theirs.null_space_dimension)
+        assert mine.residual == pytest.approx(theirs.residual, rel=1e-9)
+
+
 # Reports and validation ----------------------------------------------------------------------
 
 

@@ -123,7 +123,11 @@ motion, ``M ≻ 0``, condition ~100) takes its SVD from the eigendecomposition
 of ``Ā Āᵀ`` and its null space from one Householder QR; a tall one
 (``m ≥ k ≥ 8``) tries ``Āᵀ Ā``. Squaring loses ``ε κ²`` relative in the
 smallest singular value, so both are used only up to ``κ =``
-:data:`GRAM_CONDITION_LIMIT` (the SVD otherwise). DAQP is called directly
+:data:`GRAM_CONDITION_LIMIT` (the SVD otherwise). A level whose rows combine
+fewer dimensions than they are (the points of a rigid sole: 24 rows, rank 12)
+may come with an orthonormal basis of their span (:attr:`Level.row_basis`):
+solved in it, the level is the same least squares with ``r`` rows, the
+wide, well-conditioned kind that the eigendecomposition serves. DAQP is called directly
 with the arguments ``qpsolvers`` would give it (:func:`solve_qp_bounded`).
 None of this changes the problem, only rounding: its QPs are fed the same
 data up to it (their proximal-point iterations make the solution depend on

@@ -343,3 +343,13 @@ def test_a_tick_without_diagnostics_commands_the_same(robot):
         "contact_wrench_in_world",
     ):
         np.testing.assert_array_equal(getattr(bare, name), getattr(full, name))
+
+
+def test_the_contact_rows_lie_in_the_soles_row_basis(robot):
+    """6 orthonormal directions per sole hold its points' Jacobian rows (App. C)."""
+    _, _, layout = layout_at(robot, 6)
+    basis = layout.contact_row_basis()
+    jacobian = layout.point_jacobian
+    assert basis.shape == (jacobian.shape[0], 6 * len(robot.contacts))
+    np.testing.assert_allclose(basis.T @ basis, np.eye(basis.shape[1]), atol=1e-14)
+    np.testing.assert_allclose(basis @ (basis.T @ jacobian), jacobian, atol=1e-12)
