@@ -265,10 +265,8 @@ class PrioritizedController(Controller):
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self._data = robot.model.createData()
         self._index = LayoutIndex(robot)
-        self._planted_cache: tuple[int, tuple[bool, ...]] = (0, ())
-        self._friction_cache: tuple[int, tuple[float, ...]] = (0, ())
+        self._derived: dict[str, Any] = {}  # from the parameters; cleared by set_params
         self._forces_cache: dict[int, _Term] = {}
-        self._torque_cache: tuple[tuple[int, float] | None, Any] = (None, None)
         self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._height_change_start_s: float | None = None  # state time a new height was set
         self._pending_height_change = False
@@ -289,6 +287,7 @@ class PrioritizedController(Controller):
         """Apply parameters; a new ``com_height`` starts a target objective (eq. 6–7)."""
         old_height = self._params.get("com_height")
         super().set_params(params)
+        self._derived = {}
         if old_height is not None and self._params["com_height"] != old_height:
             self._pending_height_change = True
 
@@ -403,20 +402,20 @@ class PrioritizedController(Controller):
         )
 
     def _planted(self) -> tuple[bool, ...]:
-        """Per contact, whether ``support_mask`` allows it (cached per parameter value)."""
-        mask = self._params["support_mask"]
-        key = id(mask)
-        if self._planted_cache[0] != key:
-            self._planted_cache = (key, tuple(bool(allowed > 0.5) for allowed in mask))
-        return self._planted_cache[1]
+        """Per contact, whether ``support_mask`` allows it (until the parameters change)."""
+        planted = self._derived.get("planted")
+        if planted is None:
+            planted = tuple(bool(allowed > 0.5) for allowed in self._params["support_mask"])
+            self._derived["planted"] = planted
+        return planted
 
     def _friction_key(self) -> tuple[float, ...]:
-        """``friction_coefficients`` as a tuple (cached per parameter value)."""
-        mus = self._params["friction_coefficients"]
-        key = id(mus)
-        if self._friction_cache[0] != key:
-            self._friction_cache = (key, tuple(float(mu) for mu in mus))
-        return self._friction_cache[1]
+        """``friction_coefficients`` as a tuple (until the parameters change)."""
+        mus = self._derived.get("friction")
+        if mus is None:
+            mus = tuple(float(mu) for mu in self._params["friction_coefficients"])
+            self._derived["friction"] = mus
+        return mus
 
     def _objectives(
         self, control_input: ControlInput, terms: DynamicsTerms, layout: PrioritizedLayout
@@ -541,10 +540,10 @@ class PrioritizedController(Controller):
         return term
 
     def _least_torque(self, layout: PrioritizedLayout) -> _Term:
-        """``torque`` over the ``τ`` block (eq. 15), rebuilt when its parameters change."""
-        p = self._params
-        key = (id(p["torque_selection"]), p["weight_torque"])
-        if self._torque_cache[0] != key:
+        """``torque`` over the ``τ`` block (eq. 15), until the parameters change."""
+        term = self._derived.get("torque")
+        if term is None:
+            p = self._params
             selection = np.asarray(p["torque_selection"], dtype=float)
             weight = float(p["weight_torque"])
             term = _Term(
@@ -553,8 +552,8 @@ class PrioritizedController(Controller):
                 None,
                 weight > 0 and bool(np.any(selection > 0)),
             )
-            self._torque_cache = (key, term)
-        return self._torque_cache[1]
+            self._derived["torque"] = term
+        return term
 
     def _height_acceleration(
         self, time_s: float, com: np.ndarray, com_velocity: np.ndarray

@@ -353,3 +353,25 @@ def test_the_contact_rows_lie_in_the_soles_row_basis(robot):
     assert basis.shape == (jacobian.shape[0], 6 * len(robot.contacts))
     np.testing.assert_allclose(basis.T @ basis, np.eye(basis.shape[1]), atol=1e-14)
     np.testing.assert_allclose(basis @ (basis.T @ jacobian), jacobian, atol=1e-12)
+
+
+def test_parameter_changes_reach_what_is_kept_between_ticks():
+    """Support mask, friction and torque selection are cached per parameter set, not per tick."""
+    robot = load_robot_model("thesis_humanoid")
+    q, v = near_standing_state(robot, 8)
+    controller = create_controller("prioritized", robot, {"contact_distance": 1.0})
+    tick = ControlInput(0.0, q, v, (True, True))
+    both = controller.compute(tick)
+    counts = [len(c.points_in_frame) for c in robot.contacts]
+    left = slice(0, counts[0])
+    assert np.abs(both.contact_force_in_world[left]).max() > 1.0
+    controller.set_params({"support_mask": [0.0, 1.0]})
+    right_only = controller.compute(tick)
+    assert not right_only.contact_force_in_world[left].any()
+    controller.set_params({"support_mask": [1.0, 1.0], "friction_coefficients": [0.05, 0.05]})
+    forces = controller.compute(tick).contact_force_in_world
+    grip = 0.05 / math.sqrt(2.0) * forces[:, 2] + 1e-6
+    assert np.all(np.abs(forces[:, :2]) <= grip[:, None])
+    controller.set_params({"torque_selection": [1.0] * robot.nv_joints, "priority_torque": 2})
+    levels = controller.compute(tick).diagnostics["prioritized"]["priority_levels"]
+    assert any("torque" in level["objectives"] for level in levels)
