@@ -29,14 +29,12 @@ Pinocchio's RNEA and no mass matrix, and defers to
 
 from __future__ import annotations
 
-import ctypes
 import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
 
-import daqp
 import numpy as np
 import pinocchio as pin
 import qpsolvers
@@ -44,7 +42,7 @@ from scipy.linalg import lapack
 
 from controller_server.dynamics import ContactGeometry, DynamicsTerms
 from controller_server.models import RobotModel
-from controller_server.solvers.prioritized import QP_ITERATION_LIMITS, solve_qp_bounded
+from controller_server.solvers.prioritized import solve_qp_bounded
 from controller_server.spatial import wrench_map
 
 __all__ = [
@@ -463,49 +461,16 @@ def _solve_qp(
     k = max(1.0, scale / QP_DATA_SCALE)
     if k > 1.0:
         q, h, b = q / k, h / k, None if b is None else b / k
-    if qp_solver == "daqp":
-        x = _solve_daqp(P, q, G, h, A, b)
-    else:
-        try:
-            solution = solve_qp_bounded(
-                qpsolvers.Problem(P, q, G, h, A, b), qp_solver, **QP_SETTINGS.get(qp_solver, {})
-            )
-        except (ValueError, np.linalg.LinAlgError, qpsolvers.ProblemError, qpsolvers.SolverError):
-            return None  # e.g. quadprog's "constraints are inconsistent", "P is not definite"
-        x = solution.x if solution.found else None
-    if x is None:
+    try:
+        solution = solve_qp_bounded(
+            qpsolvers.Problem(P, q, G, h, A, b), qp_solver, **QP_SETTINGS.get(qp_solver, {})
+        )
+    except (ValueError, np.linalg.LinAlgError, qpsolvers.ProblemError, qpsolvers.SolverError):
+        return None  # e.g. quadprog's "constraints are inconsistent", "P is not definite"
+    if not solution.found or solution.x is None:
         return None
-    x = x * k if k > 1.0 else x
+    x = solution.x * k if k > 1.0 else solution.x
     return x if np.all(np.isfinite(x)) else None
-
-
-def _solve_daqp(
-    P: np.ndarray,
-    q: np.ndarray,
-    G: np.ndarray,
-    h: np.ndarray,
-    A: np.ndarray | None,
-    b: np.ndarray | None,
-) -> np.ndarray | None:
-    """DAQP called directly: the same problem and iteration cap as through ``qpsolvers``.
-
-    ``qpsolvers`` re-checks and restacks every matrix on each call, which cost more than the
-    solve itself for these small problems; here the rows are stacked once, equalities last
-    (DAQP's ``sense`` 5: an active equality, as ``qpsolvers`` passes them).
-    """
-    if A is None or not len(A):
-        rows, upper, lower, sense = G, h, np.full(h.size, -np.inf), None
-    else:
-        rows = np.vstack([G, A])
-        upper = np.concatenate([h, b])
-        lower = np.concatenate([np.full(h.size, -np.inf), b])
-        sense = np.zeros(upper.size, dtype=ctypes.c_int)
-        sense[h.size :] = 5
-    x, _, exitflag, _ = daqp.solve(
-        np.ascontiguousarray(P), q, np.ascontiguousarray(rows), upper, lower, sense,
-        iter_limit=QP_ITERATION_LIMITS["daqp"]["iter_limit"],
-    )  # fmt: skip
-    return x if exitflag > 0 else None
 
 
 def wrenches_from_point_forces(

@@ -573,11 +573,11 @@ def solve_qp_bounded(
         and type(P) is np.ndarray
         and type(G) is np.ndarray
         and h is not None
-        and A is None
+        and (A is None or type(A) is np.ndarray)
         and lb is None
         and ub is None
     ):
-        return _solve_daqp(problem, P, q, G, h, capped)
+        return _solve_daqp(problem, P, q, G, h, A, b, capped)
     dense = not any(scipy.sparse.issparse(matrix) for matrix in (P, G, A))
     if solver != "proxqp" or proxqp is None or not dense:
         if solver == "proxqp":  # qpsolvers' proxqp_solve_problem knows no max_iter_in
@@ -613,19 +613,28 @@ def _solve_daqp(
     q: np.ndarray,
     G: np.ndarray,
     h: np.ndarray,
+    A: np.ndarray | None,
+    b: np.ndarray | None,
     settings: dict[str, Any],
 ) -> qpsolvers.Solution:
-    """``min ½ xᵀ P x + qᵀ x  s.t.  G x ≤ h`` by ``daqp.solve``, as ``qpsolvers`` calls it.
+    """``min ½ xᵀ P x + qᵀ x  s.t.  G x ≤ h, A x = b`` by ``daqp.solve``, as ``qpsolvers`` calls it.
 
-    The same arguments as ``qpsolvers.solvers.daqp_.daqp_solve_problem`` (``h`` as the upper
-    bound, ``-1e30`` below, every row an inequality), so the same result.
+    The same arguments as ``qpsolvers.solvers.daqp_.daqp_solve_problem`` (``h`` then ``b`` as
+    the upper bounds, ``-1e30`` below, the equality rows last with DAQP's ``sense`` 5), so the
+    same result.
     """
     if G.ndim != 2 or h.shape != (G.shape[0],):  # what Problem.check_constraints refuses
         raise qpsolvers.ProblemError(f"inconsistent G x ≤ h: {G.shape=}, {h.shape=}")
-    rows = G.shape[0]
+    inequalities = G.shape[0]
     build_start = time.perf_counter()
+    if A is not None and b is not None and len(A):
+        if A.ndim != 2 or b.shape != (A.shape[0],):
+            raise qpsolvers.ProblemError(f"inconsistent A x = b: {A.shape=}, {b.shape=}")
+        G, h = np.vstack([G, A]), np.concatenate([h, b])
+    rows = G.shape[0]
     lower = np.full(rows, -1e30)
     sense = np.zeros(rows, dtype=np.intc)
+    sense[inequalities:] = 5
     solve_start = time.perf_counter()
     x, objective, exitflag, info = _daqp_solve(P, q, G, h, lower, sense, **settings)
     solve_end = time.perf_counter()
@@ -635,8 +644,8 @@ def _solve_daqp(
         solution.x = x
         solution.obj = objective
         solution.z_box = info["lam"][:0]
-        solution.z = info["lam"][:rows]
-        solution.y = info["lam"][rows:]
+        solution.z = info["lam"][:inequalities]
+        solution.y = info["lam"][inequalities:]
     solution.build_time = solve_start - build_start
     solution.solve_time = solve_end - solve_start
     return solution
