@@ -1,8 +1,9 @@
 """Posture objectives: the trunk upright and the joints at a rest pose (de Lasa et al. 2010, §4).
 
-One setpoint (eq. 4) on the configuration error ``q_rest ⊖ q``
-(:func:`~controller_server.features.tracking.compute_tracking_objective`
-with zero reference velocity and acceleration), split into two objectives
+One setpoint (eq. 4) on the configuration error ``q_rest ⊖ q``, ``q̈_des =
+k_p (q_rest ⊖ q) − k_v q̇`` (the tracking objective of
+:mod:`~controller_server.features.tracking` with zero reference velocity and
+acceleration), split into two objectives
 with their own gains and weights: ``trunk``, the root orientation rows
 (cf. E_trunk of Table 2), and ``pose``, the joint rows (E_pose). The root
 position is left free.
@@ -10,12 +11,13 @@ position is left free.
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 import pinocchio as pin
 
 from controller_server.features.objective import Objective
 from controller_server.features.setpoint import critical_damping
-from controller_server.features.tracking import compute_tracking_objective
 
 __all__ = ["compute_posture_objectives"]
 
@@ -49,27 +51,24 @@ def compute_posture_objectives(
         trunk_weight: α of ``trunk``.
         pose_weight: α of ``pose``.
     """
-    q_rest = pin.neutral(model)
-    q_rest[:3] = q[:3]
-    q_rest[3:7] = orientation_trunk_in_world_xyzw
-    q_rest[7:] = joint_position_reference
-    stiffness = np.concatenate(
-        [np.zeros(3), np.full(3, trunk_stiffness), np.full(model.nv - 6, pose_stiffness)]
+    q_rest = np.concatenate([q[:3], orientation_trunk_in_world_xyzw, joint_position_reference])
+    error = pin.difference(model, q, q_rest)  # q_rest ⊖ q
+    trunk_desired = (
+        trunk_stiffness * error[ROOT_ORIENTATION]
+        - critical_damping(trunk_stiffness, damping_ratio) * v[ROOT_ORIENTATION]
     )
-    zero = np.zeros(model.nv)
-    servo = compute_tracking_objective(
-        model,
-        q,
-        v,
-        q_rest,
-        zero,
-        zero,
-        stiffness,
-        critical_damping(stiffness, damping_ratio),
-        zero,
+    pose_desired = (
+        pose_stiffness * error[JOINTS] - critical_damping(pose_stiffness, damping_ratio) * v[JOINTS]
     )
-    trunk = Objective(
-        "trunk", servo.A[ROOT_ORIENTATION], servo.b[ROOT_ORIENTATION], np.full(3, trunk_weight)
-    )
-    pose = Objective("pose", servo.A[JOINTS], servo.b[JOINTS], np.full(model.nv - 6, pose_weight))
+    rows = _identity_rows(model.nv)
+    trunk = Objective("trunk", rows[ROOT_ORIENTATION], trunk_desired, np.full(3, trunk_weight))
+    pose = Objective("pose", rows[JOINTS], pose_desired, np.full(model.nv - 6, pose_weight))
     return trunk, pose
+
+
+@cache
+def _identity_rows(size: int) -> np.ndarray:
+    """The ``(size, size)`` identity, read only (objectives share its row blocks)."""
+    identity = np.eye(size)
+    identity.setflags(write=False)
+    return identity
