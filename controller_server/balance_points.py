@@ -157,8 +157,11 @@ def shrink_polygon(polygon_xy: np.ndarray, margin: float) -> np.ndarray:
     polygon_xy = np.asarray(polygon_xy, dtype=float).reshape(-1, 2)
     if not len(polygon_xy):
         return np.zeros((1, 2))
-    centre = polygon_xy.mean(axis=0, keepdims=True)
-    vertices = _turning_vertices([(x, y) for x, y in polygon_xy.tolist()])
+    listed = [(x, y) for x, y in polygon_xy.tolist()]
+    centre = np.array(
+        [[sum(x for x, _ in listed) / len(listed), sum(y for _, y in listed) / len(listed)]]
+    )
+    vertices = _turning_vertices(list(listed))
     if len(vertices) < 3:
         return centre
     if margin <= 0.0:
@@ -205,9 +208,9 @@ def closest_point_in_polygon(point_xy: np.ndarray, polygon_xy: np.ndarray) -> np
 
     A handful of vertices per tick: scalar arithmetic, no array temporaries.
     """
-    px, py = (float(c) for c in point_xy[:2])
+    px, py = point_xy[:2].tolist() if isinstance(point_xy, np.ndarray) else map(float, point_xy[:2])
     vertices = np.asarray(polygon_xy, dtype=float).reshape(-1, 2).tolist()
-    if not vertices or not np.all(np.isfinite(vertices)):
+    if not vertices or not all(math.isfinite(x) and math.isfinite(y) for x, y in vertices):
         return np.full(2, np.nan)  # no polygon: nothing is inside it
     edges = list(zip(vertices, vertices[1:] + vertices[:1], strict=True))
     if len(vertices) >= 3 and all(

@@ -89,15 +89,20 @@ def admissible_linear_momentum_rate(
     lever = (position_com_in_world[2] - ground_height) / (total_mass * gravity)
     if not 0.0 < lever < math.inf:
         return desired_rate
-    com_xy = position_com_in_world[HORIZONTAL]
-    cop = com_xy - lever * desired_rate[HORIZONTAL]
-    admissible = desired_rate.copy()
-    cop_admissible = closest_point_in_polygon(cop, admissible_cop_polygon_xy)
-    admissible[HORIZONTAL] = (com_xy - cop_admissible) / lever
+    # Two horizontal components: scalar arithmetic beats numpy's per-call overhead here.
+    com_x, com_y = float(position_com_in_world[0]), float(position_com_in_world[1])
+    rate_x, rate_y, rate_z = desired_rate.tolist()
+    cop = np.array([com_x - lever * rate_x, com_y - lever * rate_y])
+    cop_x, cop_y = closest_point_in_polygon(cop, admissible_cop_polygon_xy).tolist()
     # Per axis, as the inverse dynamics' pyramid inscribed in the cone allows.
     grip = friction_coefficient / math.sqrt(2.0) * total_mass * gravity
-    admissible[HORIZONTAL] = np.clip(admissible[HORIZONTAL], -grip, grip)
-    return admissible
+    return np.array(
+        [
+            min(max((com_x - cop_x) / lever, -grip), grip),
+            min(max((com_y - cop_y) / lever, -grip), grip),
+            rate_z,
+        ]
+    )
 
 
 def compute_linear_momentum_objective(
