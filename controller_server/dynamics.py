@@ -1,8 +1,8 @@
 """Per-tick rigid-body terms the controllers need, computed by Pinocchio.
 
 A thin layer: no rigid-body algorithm is written here. One call to
-:func:`compute_dynamics_terms` runs Pinocchio's ``computeAllTerms`` and a
-zero-acceleration forward kinematics pass, then reads off
+:func:`compute_dynamics_terms` runs Pinocchio's ``computeAllTerms`` and the
+centroidal momentum rate at zero acceleration (a kinematics pass), then reads off
 
 * the joint-space mass matrix ``M`` and bias forces ``h`` (Macchietto 2008,
   eq. 2.1: ``h = C + G``),
@@ -184,9 +184,9 @@ def compute_dynamics_terms(
     bias_forces = data.nle.copy()
     position_com = data.com[0].copy()
     total_mass = float(data.mass[0])
+    # Also leaves the kinematics of q̈ = 0 in data: the drift terms are classical
+    # accelerations with q̈ = 0 (App. A, eq. A.9–A.10).
     momentum = compute_momentum_rates(model, data, q, v)
-    # Drift terms: classical accelerations with q̈ = 0 (App. A, eq. A.9–A.10).
-    pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
     pin.updateFramePlacements(model, data)
 
     support_jacobians, support_drifts = [], []

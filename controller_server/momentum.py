@@ -8,7 +8,8 @@ The thesis writes the momentum rates as linear maps of the accelerations:
 
 Stacked, ``[R; S]`` is the centroidal momentum matrix ``A_g`` and
 ``[r_bias; s_bias] = Ȧ_g q̇``, which Pinocchio computes in one pass
-(``computeCentroidalMapTimeVariation``, Orin & Goswami's centroidal
+(the centroidal map of ``computeAllTerms`` and
+``computeCentroidalMomentumTimeVariation``, Orin & Goswami's centroidal
 dynamics). Momentum is rigid-body dynamics, so it comes from Pinocchio; the
 per-body sums of App. B are kept as the independent reference in
 ``tests/controller_server/test_momentum.py``, where both agree to 1e-8.
@@ -48,19 +49,21 @@ class MomentumRates:
 def compute_momentum_rates(
     model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray
 ) -> MomentumRates:
-    """``R, r_bias, S, s_bias`` (App. B) as ``A_g`` and ``Ȧ_g q̇`` from Pinocchio.
+    """``R, S`` (App. B) as ``A_g``, and ``r_bias, s_bias`` as ``Ȧ_g q̇``, from Pinocchio.
 
-    Overwrites the kinematics in ``data`` with those of ``(q, v)``.
+    ``data`` must hold ``computeAllTerms`` (or ``ccrba``) at ``(q, v)``, which
+    computed ``A_g``. ``Ȧ_g q̇`` is the momentum rate at ``q̈ = 0``
+    (``computeCentroidalMomentumTimeVariation``), which leaves in ``data`` the
+    kinematics of ``(q, v, q̈ = 0)``: what the contact drifts need as well.
     """
-    pin.computeCentroidalMapTimeVariation(model, data, q, v)
     centroidal_matrix = data.Ag.copy()
-    bias = data.dAg @ v
-    momentum = centroidal_matrix @ v
+    bias = pin.computeCentroidalMomentumTimeVariation(model, data, q, v, np.zeros(model.nv))
+    momentum = data.hg.vector  # A_g q̇, computed again by that call
     return MomentumRates(
         R=centroidal_matrix[:3],
-        r_bias=bias[:3],
+        r_bias=bias.linear.copy(),
         S=centroidal_matrix[3:],
-        s_bias=bias[3:],
-        linear_momentum=momentum[:3],
-        angular_momentum=momentum[3:],
+        s_bias=bias.angular.copy(),
+        linear_momentum=momentum[:3].copy(),
+        angular_momentum=momentum[3:].copy(),
     )
