@@ -238,6 +238,7 @@ class ControllerClient:
         self.welcome: Welcome | None = None
         self._context = zmq.Context()
         self._socket: zmq.Socket | None = None
+        self._receive_timeout_ms = -1
         self._hello: Hello | None = None
         self._seq = 0
         self._pending_seq: int | None = None
@@ -427,6 +428,7 @@ class ControllerClient:
             self._socket = self._context.socket(zmq.DEALER)
             self._socket.setsockopt(zmq.LINGER, 0)
             self._socket.setsockopt(zmq.SNDTIMEO, max(1, int(self.timeout_s * 1000)))
+            self._receive_timeout_ms = -1  # a fresh socket waits forever
             # A random routing id: another peer cannot guess it to reach this session.
             self._socket.setsockopt(zmq.ROUTING_ID, b"c" + os.urandom(15))
             if self.curve is not None:
@@ -460,14 +462,21 @@ class ControllerClient:
     def _await(self, seq: int, request_type: str, reply_type: type[Any], timeout_s: float) -> Any:
         socket = self._open_socket()
         deadline = time.monotonic() + timeout_s
-        while (remaining_ms := (deadline - time.monotonic()) * 1000) > 0:
-            if not socket.poll(max(1, int(remaining_ms)), zmq.POLLIN):
+        wait_ms = max(1, int(timeout_s * 1000))
+        while wait_ms > 0:
+            if wait_ms != self._receive_timeout_ms:  # one call (a receive with a timeout)
+                socket.setsockopt(zmq.RCVTIMEO, wait_ms)
+                self._receive_timeout_ms = wait_ms
+            try:
+                data = socket.recv()
+            except zmq.Again:
                 break
-            reply = decode(socket.recv())
+            reply = decode(data)
             if self.recorder is not None:
                 self.recorder.record(reply, "received")
-            if reply.seq != seq:
-                continue  # late reply to a request that already timed out
+            if reply.seq != seq:  # late reply to a request that already timed out
+                wait_ms = int((deadline - time.monotonic()) * 1000)
+                continue
             if isinstance(reply, Error):
                 raise ServerError(reply.code, reply.field, reply.detail, reply.seq)
             if not isinstance(reply, reply_type):

@@ -1,11 +1,14 @@
 """The ZeroMQ server: a broker in front of session worker processes.
 
 The zguide's load-balancing broker, adapted to sessions that keep state: a
-ROUTER faces the clients, a second ROUTER (``ipc://`` in a private directory)
-faces the worker processes (:mod:`controller_server.worker`). A ``hello`` opens
-the client's session on the worker with the fewest; every later request of
-that session goes to the same worker. So serving uses every core, and a slow
-session delays only the sessions of its own worker.
+ROUTER faces the clients, and each worker process
+(:mod:`controller_server.worker`) is reached over a Unix socket pair of its
+own. A ``hello`` opens the client's session on the worker with the fewest;
+every later request of that session goes to the same worker. So serving uses
+every core, and a slow session delays only the sessions of its own worker.
+The broker polls the client socket and every worker's socket in one
+``zmq.Poller``, and a request crosses it as it came (its bytes are not
+decoded, only peeked at for ``type`` and ``seq``).
 
 The broker never computes a tick. It enforces what a server in front of a
 robot needs:
@@ -26,13 +29,13 @@ robot needs:
 from __future__ import annotations
 
 import dataclasses
+import gc
 import itertools
 import logging
 import os
-import shutil
+import socket
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from typing import Any
@@ -42,7 +45,7 @@ import zmq
 
 from controller_server.config import SINGLE_THREADED_BLAS, ServeConfig
 from controller_server.session_table import SessionTable
-from controller_server.worker import REPLY_HEADER, REQUEST_HEADER
+from controller_server.worker import REPLY_HEADER, REQUEST_HEADER, Channel
 from protocol.codec import encode
 from protocol.errors import ErrorCode
 from protocol.messages import Error, Message, SessionStats, Stats
@@ -58,6 +61,10 @@ EXPIRY_CHECK_INTERVAL_S = 1.0
 DRAIN_S = 1.0
 """After SIGTERM, requests already received are still answered for this long."""
 WORKER_START_TIMEOUT_S = 120.0
+MAX_WORKER_BACKLOG_BYTES = 256 * 1024 * 1024
+"""Bytes queued for a worker that does not read (stuck) beyond which requests are refused."""
+_POLLIN, _POLLOUT, _POLLERR = int(zmq.POLLIN), int(zmq.POLLOUT), int(zmq.POLLERR)
+"""Plain ints: pyzmq's flags are enums, and combining them costs an enum call each."""
 DEADLINE_DETAIL = (
     "not served within the server's deadline (`poise serve --deadline`); "
     "nothing was computed for it that can reach an actuator"
@@ -68,7 +75,7 @@ class ServerStartError(RuntimeError):
     """The server could not start (bad key file, endpoint in use, worker failed)."""
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(slots=True)
 class _Route:
     """Where a client's session lives, and who may use it."""
 
@@ -81,7 +88,7 @@ class _Route:
     in_flight: int = 0
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(slots=True)
 class _Pending:
     """A request forwarded to a worker and not yet answered by it."""
 
@@ -97,13 +104,20 @@ class _Pending:
 class _Worker:
     identity: bytes
     process: subprocess.Popen[bytes]
+    channel: Channel
     ready: bool = False
+    writing: bool = False
+    """Whether the broker waits for its socket to take more (polls it for output)."""
     routes: set[bytes] = dataclasses.field(default_factory=set)
     """Routing ids of the clients whose sessions live here."""
     pending: dict[bytes, _Pending] = dataclasses.field(default_factory=dict)
     """Forwarded requests by id, in the order sent (and served)."""
     backlog: list[list[bytes]] = dataclasses.field(default_factory=list)
     """Messages for it held until it reports ready (a replacement warming up)."""
+
+    @property
+    def fd(self) -> int:
+        return self.channel.fileno()
 
 
 @dataclasses.dataclass
@@ -151,6 +165,8 @@ class ControllerServer:
         self.stop_event = threading.Event()
         self.routes: dict[bytes, _Route] = {}
         self.workers: dict[bytes, _Worker] = {}
+        self._workers_by_fd: dict[int, _Worker] = {}
+        self._serving = False
         self._gathers: dict[bytes, _Gather] = {}
         self._ids = itertools.count(1)
         self._generation = itertools.count()
@@ -165,13 +181,9 @@ class ControllerServer:
         if self._curve:
             self._enable_curve()
         self.bound_endpoints: list[str] = []
-        self._runtime_dir = tempfile.mkdtemp(prefix="poise-broker-")
-        self._backend = self._context.socket(zmq.ROUTER)
-        self._backend.setsockopt(zmq.LINGER, 0)
-        self._backend.setsockopt(zmq.ROUTER_MANDATORY, 1)
-        self._backend_endpoint = f"ipc://{self._runtime_dir}/workers"
+        self._poller = zmq.Poller()
+        self._poller.register(self._frontend, zmq.POLLIN)
         try:
-            self._backend.bind(self._backend_endpoint)
             for endpoint in config.endpoints:
                 self._frontend.bind(endpoint)
                 self.bound_endpoints.append(self._frontend.getsockopt_string(zmq.LAST_ENDPOINT))
@@ -228,63 +240,83 @@ class ControllerServer:
                     )
             if time.monotonic() > deadline:
                 raise ServerStartError("workers did not start in time")
-            if self._backend.poll(100):
-                self._serve_backend()
+            for fd, _ in self._poller.poll(100):
+                if fd in self._workers_by_fd:
+                    self._serve_worker(self._workers_by_fd[fd])
 
     def _spawn_worker(self) -> None:
         identity = f"w{next(self._generation)}".encode()
-        process = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "controller_server.worker",
-                identity.decode(),
-                self._backend_endpoint,
-                self.config.to_json(),
-            ],
-            env={**os.environ, **SINGLE_THREADED_BLAS},
-        )
-        self.workers[identity] = _Worker(identity, process)
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            process = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "controller_server.worker",
+                    identity.decode(),
+                    str(theirs.fileno()),
+                    self.config.to_json(),
+                ],
+                env={**os.environ, **SINGLE_THREADED_BLAS},
+                pass_fds=(theirs.fileno(),),
+            )
+        except BaseException:
+            ours.close()
+            raise
+        finally:
+            theirs.close()  # the worker holds it: when the worker exits, ours reads EOF
+        worker = _Worker(identity, process, Channel(ours, blocking=False))
+        self.workers[identity] = worker
+        self._workers_by_fd[worker.fd] = worker
+        self._poller.register(worker.fd, _POLLIN)
 
     # ----------------------------------------------------------------- loop
 
     def serve_forever(self) -> None:
         """Serve until :attr:`stop_event` is set, drain for up to a second, then close."""
-        poller = zmq.Poller()
-        poller.register(self._frontend, zmq.POLLIN)
-        poller.register(self._backend, zmq.POLLIN)
         last_expiry_check = time.monotonic()
         log.info("serving on %s", ", ".join(self.bound_endpoints))
+        gc.freeze()  # what start-up made is never garbage: collections skip it
+        self._serving = True
         try:
             while not self.stop_event.is_set():
-                self._turn(poller)
+                self._turn()
                 now = time.monotonic()
                 if now - last_expiry_check > EXPIRY_CHECK_INTERVAL_S:
                     self.expire_sessions(now)
                     last_expiry_check = now
-            self._drain(poller)
+            self._drain()
         finally:
             self.close()
 
-    def _turn(self, poller: zmq.Poller) -> None:
-        events = dict(poller.poll(self._poll_timeout_ms()))
-        if self._backend in events:
-            for _ in range(1000):  # replies first: they free clients
-                self._serve_backend()
-                if not self._backend.poll(0):
+    def _turn(self) -> None:
+        frontend = False
+        for socket_or_fd, event in self._poller.poll(self._poll_timeout_ms()):
+            if socket_or_fd is self._frontend:
+                frontend = True
+                continue
+            worker = self._workers_by_fd.get(socket_or_fd)
+            if worker is None:
+                continue
+            if event & _POLLOUT:
+                self._flush(worker)
+            if event & (_POLLIN | _POLLERR):  # replies first: they free clients
+                self._serve_worker(worker)
+        if frontend:
+            for _ in range(100):  # what has arrived, then look at the workers again
+                self._serve_frontend()
+                if not self._frontend.getsockopt(zmq.EVENTS) & _POLLIN:
                     break
-        if self._frontend in events:
-            self._serve_frontend()
         self._enforce_deadlines(time.monotonic())
 
-    def _drain(self, poller: zmq.Poller) -> None:
+    def _drain(self) -> None:
         """Answer what has arrived and what is in flight, for at most :data:`DRAIN_S`."""
         end = time.monotonic() + DRAIN_S
         while time.monotonic() < end:
             busy = any(w.pending for w in self.workers.values()) or self._gathers
             if not busy and not self._frontend.poll(0):
                 break
-            self._turn(poller)
+            self._turn()
         for worker in self.workers.values():
             for pending in worker.pending.values():
                 self._answer_late(pending, "the server is stopping")
@@ -303,7 +335,11 @@ class ControllerServer:
     # ----------------------------------------------------------------- clients
 
     def _serve_frontend(self) -> None:
-        frames = self._frontend.recv_multipart(copy=False)
+        """Serve one client message (one has arrived)."""
+        try:
+            frames = self._frontend.recv_multipart(zmq.NOBLOCK, copy=False)
+        except zmq.Again:
+            return
         identity = frames[0].bytes
         if len(frames) != 2:
             detail = f"expected one frame per message, got {len(frames) - 1}"
@@ -405,21 +441,42 @@ class ControllerServer:
             identity, seq, route, now + deadline_s, now + deadline_s + self.config.recycle_after_s
         )
         header = REQUEST_HEADER.pack(request_id, route.key, now + deadline_s)
-        if not self._to_worker([worker.identity, b"req", header, payload]):
+        if not self._to_worker(worker.identity, [b"req", header, payload]):
             self._answer_late(worker.pending.pop(request_id), "its worker cannot take it now")
 
-    def _to_worker(self, frames: list[bytes]) -> bool:
+    def _to_worker(self, identity: bytes, frames: list[bytes]) -> bool:
         """Send to a worker (held until it is ready); ``False`` if it cannot take it now."""
-        worker = self.workers.get(frames[0])
-        if worker is not None and not worker.ready:
+        worker = self.workers.get(identity)
+        if worker is None:
+            return False
+        if not worker.ready:
             worker.backlog.append(frames)
             return True
-        try:
-            self._backend.send_multipart(frames, zmq.NOBLOCK)
-        except zmq.ZMQError as exc:  # dead (it is replaced) or its queue is full
-            log.warning("worker %s unreachable: %s", frames[0].decode(), exc)
+        if len(worker.channel.outgoing) > MAX_WORKER_BACKLOG_BYTES:
+            log.warning("worker %s does not read: request refused", identity.decode())
             return False
+        try:
+            worker.channel.send(frames)
+        except OSError as exc:  # dead: it is replaced
+            log.warning("worker %s unreachable: %s", identity.decode(), exc)
+            return False
+        self._poll_output(worker)
         return True
+
+    def _flush(self, worker: _Worker) -> None:
+        try:
+            worker.channel.flush()
+        except OSError as exc:
+            log.warning("worker %s unreachable: %s", worker.identity.decode(), exc)
+            worker.channel.outgoing.clear()
+        self._poll_output(worker)
+
+    def _poll_output(self, worker: _Worker) -> None:
+        """Poll the worker's socket for output while bytes wait for it, else not."""
+        writing = bool(worker.channel.outgoing)
+        if writing != worker.writing:
+            worker.writing = writing
+            self._poller.modify(worker.fd, _POLLIN | (_POLLOUT if writing else 0))
 
     def _reply(self, identity: bytes, message: Message) -> None:
         self._send(identity, encode(message))
@@ -432,29 +489,34 @@ class ControllerServer:
 
     # ----------------------------------------------------------------- workers
 
-    def _serve_backend(self) -> None:
-        frames = self._backend.recv_multipart()
-        worker = self.workers.get(frames[0])
-        if worker is None:
-            return  # a recycled worker's last words
-        kind = frames[1]
-        if kind == b"ready":
-            worker.ready = True
-            log.info("worker %s ready", worker.identity.decode())
-            backlog, worker.backlog = worker.backlog, []
-            for message in backlog:
-                self._to_worker(message)
-        elif kind == b"rep":
-            request_id, session_open = REPLY_HEADER.unpack(frames[2])
-            pending = worker.pending.pop(request_id, None)
-            if pending is not None:
-                self._settle(pending, session_open, reply=frames[3])
-        elif kind == b"late":  # the worker skipped it: past its deadline before it started
-            pending = worker.pending.pop(frames[2], None)
-            if pending is not None:
-                self._answer_late(pending, DEADLINE_DETAIL)
-        elif kind == b"stats":
-            self._collect_stats(worker.identity, frames[2], frames[3])
+    def _serve_worker(self, worker: _Worker) -> None:
+        messages = worker.channel.receive()
+        if messages is None:  # its end closed: it exited
+            if self._serving:
+                log.error("worker %s died (%s)", worker.identity.decode(), worker.process.poll())
+                self._recycle(worker)
+            else:  # start_workers reports it
+                self._detach(worker)
+            return
+        for frames in messages:
+            kind = frames[0]
+            if kind == b"rep":
+                request_id, session_open = REPLY_HEADER.unpack(frames[1])
+                pending = worker.pending.pop(request_id, None)
+                if pending is not None:
+                    self._settle(pending, session_open, reply=frames[2])
+            elif kind == b"ready":
+                worker.ready = True
+                log.info("worker %s ready", worker.identity.decode())
+                backlog, worker.backlog = worker.backlog, []
+                for message in backlog:
+                    self._to_worker(worker.identity, message)
+            elif kind == b"late":  # the worker skipped it: past its deadline before it started
+                pending = worker.pending.pop(frames[1], None)
+                if pending is not None:
+                    self._answer_late(pending, DEADLINE_DETAIL)
+            elif kind == b"stats":
+                self._collect_stats(worker.identity, frames[1], frames[2])
 
     def _settle(self, pending: _Pending, session_open: bool, reply: bytes) -> None:
         """Answer a worker's reply and keep the route in step with the worker's session.
@@ -466,7 +528,7 @@ class ControllerServer:
         self._answer(pending, reply)
         current = self.routes.get(pending.identity) is pending.route
         if session_open and not current:
-            self._to_worker([pending.route.worker, b"drop", pending.route.key])
+            self._to_worker(pending.route.worker, [b"drop", pending.route.key])
         elif not session_open and current and pending.route.in_flight == 0:
             self._unroute(pending.identity, pending.route)
 
@@ -510,6 +572,8 @@ class ControllerServer:
         )
         worker.process.kill()
         worker.process.wait()
+        self._detach(worker)
+        worker.channel.close()
         for pending in worker.pending.values():
             self._answer_late(pending, "the worker serving this session failed; send hello")
         for identity in list(worker.routes):
@@ -524,6 +588,12 @@ class ControllerServer:
         if not self.stop_event.is_set():
             self._spawn_worker()
 
+    def _detach(self, worker: _Worker) -> None:
+        """Stop polling the worker's socket."""
+        if self._workers_by_fd.get(worker.fd) is worker:
+            self._poller.unregister(worker.fd)
+            del self._workers_by_fd[worker.fd]
+
     # ----------------------------------------------------------------- sessions
 
     def _unroute(self, identity: bytes, route: _Route) -> None:
@@ -536,7 +606,7 @@ class ControllerServer:
     def _drop_route(self, identity: bytes, route: _Route) -> None:
         self._unroute(identity, route)
         if route.worker in self.workers:
-            self._to_worker([route.worker, b"drop", route.key])
+            self._to_worker(route.worker, [b"drop", route.key])
 
     def expire_sessions(self, now_s: float) -> int:
         """Drop sessions idle longer than the timeout (none in flight); return how many.
@@ -551,7 +621,7 @@ class ControllerServer:
                 expired.setdefault(route.worker, []).append(route.key)
         for worker, keys in expired.items():
             if worker in self.workers:
-                self._to_worker([worker, b"drop", *keys])
+                self._to_worker(worker, [b"drop", *keys])
         count = sum(map(len, expired.values()))
         if count:
             log.info("%d sessions expired", count)
@@ -578,7 +648,7 @@ class ControllerServer:
         )
         self._gathers[request_id] = gather
         for worker, keys in visible.items():
-            self._to_worker([worker, b"stats", request_id, *keys])
+            self._to_worker(worker, [b"stats", request_id, *keys])
         self._finish_gather(request_id)
 
     def _collect_stats(self, worker: bytes, request_id: bytes, data: bytes) -> None:
@@ -609,9 +679,11 @@ class ControllerServer:
         for worker in self.workers.values():
             if worker.ready and worker.process.poll() is None:
                 try:
-                    self._backend.send_multipart([worker.identity, b"stop"], zmq.NOBLOCK)
-                except zmq.ZMQError:
+                    worker.channel.send([b"stop"])
+                except OSError:
                     pass
+            self._detach(worker)
+            worker.channel.close()  # a worker still warming up reads EOF and exits
         for worker in self.workers.values():
             try:
                 worker.process.wait(2.0)
@@ -619,9 +691,8 @@ class ControllerServer:
                 worker.process.kill()
                 worker.process.wait()
         self.workers.clear()
+        self._workers_by_fd.clear()
         if self._authenticator is not None:
             self._authenticator.stop()
         self._frontend.close(linger=0)
-        self._backend.close(linger=0)
         self._context.term()
-        shutil.rmtree(self._runtime_dir, ignore_errors=True)

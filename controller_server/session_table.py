@@ -57,8 +57,15 @@ def release_free_memory() -> None:
 
     Without it a process that once held 500 sessions keeps their pages after
     they are dropped: glibc returns memory only from the top of the heap.
+    Objects a worker froze (:func:`gc.freeze`) are collected too, and the
+    survivors frozen again.
     """
+    frozen = gc.get_freeze_count()
+    if frozen:
+        gc.unfreeze()
     gc.collect()
+    if frozen:
+        gc.freeze()
     if _MALLOC_TRIM is not None:
         _MALLOC_TRIM(0)
 
@@ -78,6 +85,8 @@ class SessionTable:
         self.record_dir = None if record_dir is None else Path(record_dir)
         self.sessions: dict[bytes, Session] = {}
         self.recorders: dict[bytes, Recorder] = {}
+        self.sessions_opened = 0
+        """Sessions created so far (a worker freezes what a new one holds, see its docs)."""
 
     def handle(self, key: bytes, payload: bytes) -> Message:
         """Answer one request for session ``key``; never raises for bad input."""
@@ -184,6 +193,7 @@ class SessionTable:
             raise
         replaced = self.sessions.get(key)
         self.sessions[key] = session
+        self.sessions_opened += 1
         self._start_recording(key, session)
         if replaced is not None:
             del replaced

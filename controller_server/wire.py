@@ -17,6 +17,7 @@ from controller_server.controllers import ControlInput, ControlOutput
 from controller_server.models import RobotModel
 from controller_server.spatial import cross
 from protocol.errors import ErrorCode, ProtocolError
+from protocol.fastpath import construct
 from protocol.messages import (
     Command,
     Diagnostics,
@@ -114,7 +115,9 @@ def command_from_output(
 
     The server's own arrays are not re-validated field by field (pydantic
     costs about 0.1 ms per tick here; the client validates what it decodes),
-    but every array an actuator could act on is checked for NaN/inf first.
+    but every array an actuator could act on is checked for NaN/inf first;
+    the messages are built as ``model_construct`` builds them
+    (:func:`protocol.fastpath.construct`).
 
     Raises:
         ProtocolError: ``INTERNAL``, naming the field, if the controller
@@ -139,17 +142,15 @@ def command_from_output(
     # Fresh arrays of this tick (views of the controller's output), encoded at once.
     values = output.diagnostics
     if values is None:
-        return Command.model_construct(seq=seq, diagnostics=None, **arrays)
+        return construct(Command, seq=seq, diagnostics=None, **arrays)
     values = dict(values)
     if values.get("weighted") is not None:
-        values["weighted"] = WeightedDiagnostics.model_construct(**values["weighted"])
+        values["weighted"] = construct(WeightedDiagnostics, **values["weighted"])
     if values.get("prioritized") is not None:
         section = values["prioritized"]
-        levels = [
-            PriorityLevelReport.model_construct(**level) for level in section["priority_levels"]
-        ]
-        values["prioritized"] = PrioritizedDiagnostics.model_construct(
-            **{**section, "priority_levels": levels}
+        levels = [construct(PriorityLevelReport, **level) for level in section["priority_levels"]]
+        values["prioritized"] = construct(
+            PrioritizedDiagnostics, **{**section, "priority_levels": levels}
         )
-    diagnostics = Diagnostics.model_construct(compute_time_s=compute_time_s, **values)
-    return Command.model_construct(seq=seq, diagnostics=diagnostics, **arrays)
+    diagnostics = construct(Diagnostics, compute_time_s=compute_time_s, **values)
+    return construct(Command, seq=seq, diagnostics=diagnostics, **arrays)

@@ -2,6 +2,9 @@
 
 Pure functions, no I/O. :func:`decode` validates once, at the edge, and turns
 every problem into a :class:`~protocol.errors.ProtocolError` naming the field.
+Well-formed messages of the 1 kHz loop (``state``, ``command``, …) are read by
+the fast path of :mod:`protocol.fastpath`; anything it cannot vouch for is
+validated by pydantic, whose error names the field.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ import msgpack
 from pydantic import ValidationError
 
 from protocol.errors import ErrorCode, ProtocolError
+from protocol.fastpath import Fallback, Reader, reader
 from protocol.messages import MESSAGE_TYPES, PROTOCOL_VERSION, Message
 
 __all__ = ["MAX_MESSAGE_BYTES", "decode", "encode"]
@@ -24,6 +28,8 @@ _ERROR_CODES = {
     "bad_shape": ErrorCode.BAD_SHAPE,
     "finite_number": ErrorCode.NON_FINITE,
 }
+
+_READERS: dict[type[Message], Reader | None] = {cls: reader(cls) for cls in MESSAGE_TYPES.values()}
 
 
 def encode(message: Message) -> bytes:
@@ -80,6 +86,12 @@ def decode(data: bytes) -> Message:
             f"type={kind!r}; expected one of {sorted(MESSAGE_TYPES)}",
             seq,
         )
+    read = _READERS[cls]
+    if read is not None:
+        try:
+            return read(payload)  # type: ignore[return-value]
+        except Fallback:  # pydantic says what is wrong, or converts what it may
+            pass
     try:
         return cls.model_validate(payload)
     except ValidationError as exc:

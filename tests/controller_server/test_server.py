@@ -233,3 +233,19 @@ def test_quaternions_are_normalised_and_far_off_ones_refused(server):
         reply = ask(server, ALICE, state.model_copy(update={field: values}))
         assert_error(reply, ErrorCode.INVALID_FIELD, field)
         assert "unit quaternion" in reply.detail
+
+
+@pytest.mark.parametrize("controller", ["momentum", "prioritized"])
+def test_real_ticks_read_by_the_fast_path_as_pydantic_reads_them(server, controller):
+    """The codec's fast path (protocol.fastpath) on real ticks: same messages as pydantic's."""
+    from protocol.fastpath import reader
+    from tests.protocol.test_fastpath import assert_same
+
+    welcome = hello(server, ALICE, controller=controller)
+    state = random_state(welcome, np.random.default_rng(6)).model_copy(update={"seq": 3})
+    state_payload = msgpack.unpackb(encode(state))
+    assert_same(reader(type(state))(state_payload), type(state).model_validate(state_payload))
+    command = server.handle(ALICE, encode(state))
+    assert isinstance(command, Command) and command.diagnostics is not None
+    payload = msgpack.unpackb(encode(command))
+    assert_same(reader(Command)(payload), Command.model_validate(payload))
