@@ -143,6 +143,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
+import eigenpy
 import numpy as np
 import qpsolvers
 import scipy.sparse
@@ -154,10 +155,6 @@ try:
     from proxsuite import proxqp
 except ImportError:  # optional backend: qpsolvers then reports it as not installed
     proxqp = None
-try:
-    import eigenpy as _eigenpy
-except ImportError:  # Pinocchio's bindings bring it; LAPACK's eigh otherwise
-    _eigenpy = None
 try:
     from daqp import solve as _daqp_solve
 except ImportError:  # optional backend: qpsolvers then reports it as not installed
@@ -904,12 +901,10 @@ def _symmetric_eigen(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues (ascending) and eigenvectors of a symmetric ``G``.
 
     Eigen's ``SelfAdjointEigenSolver`` (through eigenpy, which Pinocchio's bindings are built
-    on) when it is there: 1.5–2× faster than LAPACK's ``syevd`` at the sizes of the levels
-    (15–45), as backward stable.
+    on): 1.5–2× faster than LAPACK's ``syevd`` at the sizes of the levels (15–45), as
+    backward stable.
     """
-    if _eigenpy is None:
-        return np.linalg.eigh(G)
-    solver = _eigenpy.SelfAdjointEigenSolver(G)
+    solver = eigenpy.SelfAdjointEigenSolver(G)
     return solver.eigenvalues(), solver.eigenvectors()
 
 
