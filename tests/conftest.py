@@ -7,12 +7,31 @@ default_to_single_threaded_blas()  # before anything imports numpy (`poise` does
 from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
+import zmq  # noqa: E402
 
 from clients.server_process import ServerProcess  # noqa: E402
 from controller_server import files  # noqa: E402
 from tests.worktree import changes, tree_status  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _close_without_term(context: zmq.Context) -> None:
+    """What a ZeroMQ context left to the garbage collector does in the tests.
+
+    pyzmq's ``Context.__del__`` closes the context's sockets and calls ``term()``,
+    which waits for every socket of the context to close. A clean-clone run hung
+    there for good, in a hypothesis test long after the test that had left the
+    context behind (one that failed before closing its peers). Here the sockets
+    are closed with linger 0 and the context is left to the process's exit: a
+    test that leaks a context fails or leaks, it does not hang the suite.
+    """
+    for socket in list(getattr(context, "_sockets", None) or []):
+        if socket is not None and not socket.closed:
+            socket.close(linger=0)
+
+
+zmq.Context.__del__ = _close_without_term  # type: ignore[method-assign]
 _TREE_AT_START = pytest.StashKey[frozenset[str] | None]()
 
 

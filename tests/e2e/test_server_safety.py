@@ -6,6 +6,7 @@ process on loopback, and checks what the server now does instead.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -328,8 +329,8 @@ def test_curve_refuses_unknown_keys_and_plain_clients(curve_server):
 
 def test_sigterm_answers_requests_already_sent():
     """Defect 8: SIGTERM dropped queued requests unanswered."""
-    with ServerProcess() as server:
-        peers = [Peer(server.endpoint) for _ in range(3)]
+    with ServerProcess() as server, contextlib.ExitStack() as stack:
+        peers = [stack.enter_context(Peer(server.endpoint)) for _ in range(3)]
         welcomes = [p.ask(Hello(model="thesis_humanoid", controller="momentum")) for p in peers]
         for peer, welcome in zip(peers, welcomes, strict=True):
             peer.socket.send(encode(standing(welcome, seq=5)))
@@ -338,7 +339,6 @@ def test_sigterm_answers_requests_already_sent():
             assert peer.socket.poll(REPLY_TIMEOUT_MS)
             reply = decode(peer.socket.recv())
             assert reply.seq == 5 and isinstance(reply, Command | Error)
-            peer.close()
         assert server.process.wait(10) == 0
 
 
