@@ -1,9 +1,14 @@
-"""Baselines the benchmarks measure in the same run: a raw pyzmq echo server."""
+"""Baselines the benchmarks measure in the same run: a raw pyzmq echo server, the tick floor."""
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
+from typing import Any
 
+import daqp
+import numpy as np
+import pinocchio as pin
 import zmq
 
 
@@ -24,3 +29,27 @@ def echo_server(endpoint_queue: multiprocessing.Queue, reply_size: int) -> None:
         socket.send_multipart([identity, reply])
     socket.close(linger=0)
     context.term()
+
+
+class Floor:
+    """The tick floor: Pinocchio's dynamics terms and centroidal map, and one direct DAQP solve.
+
+    The QP has the size of the ``momentum`` controller's problem: nv unknowns, 12 equality
+    rows (two 6-D support constraints), a dense positive-definite Hessian.
+    """
+
+    def __init__(self, model: pin.Model, rng: np.random.Generator):
+        self.model, self.data = model, model.createData()
+        nv = model.nv
+        self.hessian = np.eye(nv) + 0.1 * np.ones((nv, nv))
+        self.rows = rng.normal(size=(12, nv))
+        self.sense = np.full(12, 5, dtype=ctypes.c_int)  # equalities
+        self.rng = rng
+
+    def tick(self, control_input: Any) -> None:
+        """One floor tick at ``control_input``'s ``q`` and ``v``."""
+        q, v = control_input.q, control_input.v
+        pin.computeAllTerms(self.model, self.data, q, v)
+        pin.computeCentroidalMap(self.model, self.data, q)
+        gradient, rhs = self.rng.normal(size=self.model.nv), self.rng.normal(size=12)
+        daqp.solve(self.hessian, gradient, self.rows, rhs, rhs, self.sense)

@@ -27,13 +27,11 @@ from controller_server.blas import default_to_single_threaded_blas
 default_to_single_threaded_blas()  # before numpy: see controller_server/blas.py
 
 import argparse
-import ctypes
 import time
 from pathlib import Path
 
-import daqp
 import numpy as np
-import pinocchio as pin
+from baselines import Floor
 
 from clients.sampling import random_state
 from controller_server.controllers import create_controller
@@ -47,25 +45,6 @@ CONTROLLERS = ("tracking", "momentum", "prioritized")
 RECORDED_STATES = Path(__file__).parent.parent / "tests" / "fixtures" / "replay_momentum_push.mcap"
 MOMENTUM_GOAL_RATIO = 2.0
 PRIORITIZED_GOAL_S = 1e-3
-
-
-class Floor:
-    """Pinocchio dynamics terms + centroidal map + one direct DAQP solve (nv unknowns, 12 rows)."""
-
-    def __init__(self, model: pin.Model, rng: np.random.Generator):
-        self.model, self.data = model, model.createData()
-        nv = model.nv
-        self.hessian = np.eye(nv) + 0.1 * np.ones((nv, nv))
-        self.rows = rng.normal(size=(12, nv))
-        self.sense = np.full(12, 5, dtype=ctypes.c_int)  # equalities
-        self.rng = rng
-
-    def tick(self, control_input) -> None:
-        q, v = control_input.q, control_input.v
-        pin.computeAllTerms(self.model, self.data, q, v)
-        pin.computeCentroidalMap(self.model, self.data, q)
-        gradient, rhs = self.rng.normal(size=self.model.nv), self.rng.normal(size=12)
-        daqp.solve(self.hessian, gradient, self.rows, rhs, rhs, self.sense)
 
 
 def timed(step, items) -> list[float]:

@@ -444,28 +444,6 @@ def check_same_robot(robot: Any, hello: dict[str, Any], q: np.ndarray, path: str
         )
 
 
-class Floor:
-    """bench/controller.py's floor: dynamics terms, centroidal map, one direct DAQP solve."""
-
-    def __init__(self, model: pin.Model, rng: np.random.Generator):
-        import ctypes
-
-        self.model, self.data = model, model.createData()
-        nv = model.nv
-        self.hessian = np.eye(nv) + 0.1 * np.ones((nv, nv))
-        self.rows = rng.normal(size=(12, nv))
-        self.sense = np.full(12, 5, dtype=ctypes.c_int)  # equalities
-        self.rng = rng
-
-    def tick(self, control_input: Any) -> None:
-        import daqp
-
-        pin.computeAllTerms(self.model, self.data, control_input.q, control_input.v)
-        pin.computeCentroidalMap(self.model, self.data, control_input.q)
-        gradient, rhs = self.rng.normal(size=self.model.nv), self.rng.normal(size=12)
-        daqp.solve(self.hessian, gradient, self.rows, rhs, rhs, self.sense)
-
-
 def percentiles_s(samples: list[float]) -> tuple[float, float]:
     """p50 and p99 (s), the first ticks (cold caches) left out."""
     p50, p99 = np.percentile(samples[5:], [50, 99])
@@ -499,6 +477,8 @@ def main() -> None:
         for _ in range(args.ticks)
     ]
     controller = create_controller("momentum", robot, {"optimizer_period_ticks": 1})
+    from baselines import Floor  # here: TSID's interpreter runs this file without the project
+
     floor = Floor(model, rng)
     com_desired, com_velocity_desired = support_centre_references(robot, inputs)
     worker = None
