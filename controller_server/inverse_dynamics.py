@@ -42,7 +42,7 @@ from scipy.linalg import lapack
 
 from controller_server.dynamics import ContactGeometry, DynamicsTerms
 from controller_server.models import RobotModel
-from controller_server.solvers.prioritized import solve_qp_bounded
+from controller_server.solvers.qp import solve_qp_bounded
 from controller_server.spatial import wrench_map
 
 __all__ = [
@@ -57,7 +57,7 @@ __all__ = [
 
 NUM_ROOT_DOFS = 6
 QP_SETTINGS: dict[str, dict[str, int]] = {"proxqp": {"max_iter": 300, "max_iter_in": 10}}
-"""Tighter caps than :data:`~controller_server.solvers.prioritized.QP_ITERATION_LIMITS` for
+"""Tighter caps than :data:`~controller_server.solvers.qp.QP_ITERATION_LIMITS` for
 these small QPs: ProxQP's converged solves took at most 35 outer iterations near standing and
 61 with velocities of 1e3 (seeded states of the built-in models), while a capped failure
 cost up to 0.2 s at the default caps."""

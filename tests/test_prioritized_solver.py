@@ -20,8 +20,8 @@ from controller_server.solvers.prioritized import (
     LevelReport,
     PrioritizedSolution,
     solve_prioritized,
-    solve_qp_bounded,
 )
+from controller_server.solvers.qp import solve_qp_bounded
 
 SOLVERS = ("daqp", "quadprog", "proxqp")
 FEASIBILITY = 1e-7
@@ -59,13 +59,11 @@ def test_public_names():
     assert set(prioritized.__all__) == {
         "GRAM_CONDITION_LIMIT",
         "Level",
-        "QP_ITERATION_LIMITS",
         "QP_TIME_BUDGET_S",
         "LevelReport",
         "PrioritizedSolution",
         "qp_data_limit",
         "solve_prioritized",
-        "solve_qp_bounded",
     }
 
 

@@ -86,7 +86,7 @@ vertices, where the inequality tolerances matter); proxqp is moreover not
 exactly repeatable (identical calls once differed by 1e-6).
 
 Every QP solve is bounded. Each solver call has an iteration cap
-(:data:`QP_ITERATION_LIMITS`; quadprog, an active-set method, ends by
+(:data:`~.qp.QP_ITERATION_LIMITS`; quadprog, an active-set method, ends by
 itself), and one call of :func:`solve_prioritized` tries no QP twice (retry
 settings, second curvature) once its QP solves have taken
 :data:`QP_TIME_BUDGET_S` of wall time: a level whose solvers have each failed
@@ -128,7 +128,7 @@ fewer dimensions than they are (the points of a rigid sole: 24 rows, rank 12)
 may come with an orthonormal basis of their span (:attr:`Level.row_basis`):
 solved in it, the level is the same least squares with ``r`` rows, the
 wide, well-conditioned kind that the eigendecomposition serves. DAQP is called directly
-with the arguments ``qpsolvers`` would give it (:func:`solve_qp_bounded`).
+with the arguments ``qpsolvers`` would give it (:func:`~.qp.solve_qp_bounded`).
 None of this changes the problem, only rounding: its QPs are fed the same
 data up to it (their proximal-point iterations make the solution depend on
 the coordinates, so ``z = Vᵀ w`` stays the SVD's, up to rotations of
@@ -146,33 +146,21 @@ from typing import Any, Literal
 import eigenpy
 import numpy as np
 import qpsolvers
-import scipy.sparse
-from qpsolvers.conversions import combine_linear_box_inequalities
 from qpsolvers.exceptions import QPError
 from scipy.linalg import lapack as _lapack
 
-try:
-    from proxsuite import proxqp
-except ImportError:  # optional backend: qpsolvers then reports it as not installed
-    proxqp = None
-try:
-    from daqp import solve as _daqp_solve
-except ImportError:  # optional backend: qpsolvers then reports it as not installed
-    _daqp_solve = None
-
 from controller_server.features.objective import Objective
 from controller_server.solvers.damped import damping_for_gain_bound
+from controller_server.solvers.qp import solve_qp_bounded
 
 __all__ = [
     "GRAM_CONDITION_LIMIT",
-    "QP_ITERATION_LIMITS",
     "QP_TIME_BUDGET_S",
     "Level",
     "LevelReport",
     "PrioritizedSolution",
     "qp_data_limit",
     "solve_prioritized",
-    "solve_qp_bounded",
 ]
 
 LevelStatus = Literal["solved", "infeasible", "solver failed", "not reached", "empty"]
@@ -182,23 +170,11 @@ QP_TIME_BUDGET_S = 0.02
 tried twice: no solver's retry settings, no second null-space curvature. A level whose QP
 has not succeeded by then fails as if every solver had (``"solver failed"``, or
 ``"infeasible"`` at the top level). Each solver of a level's chain (the chosen one; at the
-top level also the others) is still tried once, capped by :data:`QP_ITERATION_LIMITS`: a
+top level also the others) is still tried once, capped by :data:`~.qp.QP_ITERATION_LIMITS`: a
 slow machine loses only second tries, and the top level keeps its rescue by another solver
 (ProxQP, when chosen, can take 50 ms on a feasible level near standing). A tick thus costs
 at most about this budget plus one capped call per level and solver. With daqp, ticks near
 standing spend under 1 ms in QPs."""
-
-QP_ITERATION_LIMITS: dict[str, dict[str, int]] = {
-    # Active-set iterations; at most 77 on seeded near-standing states of the built-in models
-    # (p99 222 on the test stacks). Each costs ~5–10 µs at 116 unknowns.
-    "daqp": {"iter_limit": 1000},
-    # Outer (augmented Lagrangian) and inner (semi-smooth Newton) iterations: converged solves
-    # of the built-in models took up to 731 outer and ~2 inner ones each. ProxQP's default of
-    # 1500 inner iterations per outer one made a capped solve still run for minutes.
-    "proxqp": {"max_iter": 1000, "max_iter_in": 20},
-}
-"""Iteration caps of every QP solve (:func:`solve_qp_bounded`); quadprog needs none."""
-
 
 GRAM_CONDITION_LIMIT = 1e3
 """Largest condition number of a level flagged well conditioned (:attr:`Level.well_conditioned`)
@@ -543,109 +519,6 @@ def qp_data_limit(feasibility_tolerance: float) -> float:
     meet tolerances that fine (1e-7 allows terms up to about 4.5e8).
     """
     return feasibility_tolerance / float(np.finfo(float).eps)
-
-
-def solve_qp_bounded(
-    problem: qpsolvers.Problem, solver: str, **settings: Any
-) -> qpsolvers.Solution:
-    """:func:`qpsolvers.solve_problem` within the iteration caps of :data:`QP_ITERATION_LIMITS`.
-
-    ``settings`` may lower a cap but not raise it. ProxQP is called through its own dense
-    ``QP`` class (same settings, same defaults), because ``qpsolvers`` passes on only the
-    options of ``proxqp.dense.solve``, which lack the inner-iteration cap ``max_iter_in``.
-    DAQP, on dense inequality-only problems (the prioritized levels' QPs), is called
-    directly with exactly the arguments ``qpsolvers`` would pass it: its checks and
-    conversions cost more than the solve of a small level.
-
-    Raises:
-        qpsolvers.exceptions.QPError: As :func:`qpsolvers.solve_problem` (unknown solver,
-            inconsistent problem).
-    """
-    limits = QP_ITERATION_LIMITS.get(solver, {})
-    capped = {**settings, **{key: min(cap, settings.get(key, cap)) for key, cap in limits.items()}}
-    P, q, G, h, A, b, lb, ub = problem.unpack()
-    if (
-        solver == "daqp"
-        and _daqp_solve is not None
-        and type(P) is np.ndarray
-        and type(G) is np.ndarray
-        and h is not None
-        and (A is None or type(A) is np.ndarray)
-        and lb is None
-        and ub is None
-    ):
-        return _solve_daqp(problem, P, q, G, h, A, b, capped)
-    dense = not any(scipy.sparse.issparse(matrix) for matrix in (P, G, A))
-    if solver != "proxqp" or proxqp is None or not dense:
-        if solver == "proxqp":  # qpsolvers' proxqp_solve_problem knows no max_iter_in
-            capped.pop("max_iter_in", None)
-        return qpsolvers.solve_problem(problem, solver=solver, **capped)
-    C, upper, lower = combine_linear_box_inequalities(G, h, lb, ub, q.size, False)
-    model = proxqp.dense.QP(
-        q.size,
-        0 if A is None else A.shape[0],
-        0 if C is None else C.shape[0],
-        dense_backend=proxqp.dense.DenseBackend.PrimalDualLDLT,  # as proxqp.dense.solve
-    )
-    for key, value in capped.items():
-        if not hasattr(model.settings, key):
-            raise qpsolvers.ParamError(f"unknown ProxQP setting {key!r}")
-        setattr(model.settings, key, value)
-    start = time.perf_counter()
-    model.init(P, q, A, b, C, lower, upper)
-    model.solve()
-    info = model.results.info
-    return qpsolvers.Solution(
-        problem,
-        extras={"info": info},
-        found=info.status == proxqp.QPSolverOutput.PROXQP_SOLVED,
-        x=np.array(model.results.x),
-        solve_time=time.perf_counter() - start,
-    )
-
-
-def _solve_daqp(
-    problem: qpsolvers.Problem,
-    P: np.ndarray,
-    q: np.ndarray,
-    G: np.ndarray,
-    h: np.ndarray,
-    A: np.ndarray | None,
-    b: np.ndarray | None,
-    settings: dict[str, Any],
-) -> qpsolvers.Solution:
-    """``min ½ xᵀ P x + qᵀ x  s.t.  G x ≤ h, A x = b`` by ``daqp.solve``, as ``qpsolvers`` calls it.
-
-    The same arguments as ``qpsolvers.solvers.daqp_.daqp_solve_problem`` (``h`` then ``b`` as
-    the upper bounds, ``-1e30`` below, the equality rows last with DAQP's ``sense`` 5), so the
-    same result.
-    """
-    if G.ndim != 2 or h.shape != (G.shape[0],):  # what Problem.check_constraints refuses
-        raise qpsolvers.ProblemError(f"inconsistent G x ≤ h: {G.shape=}, {h.shape=}")
-    inequalities = G.shape[0]
-    build_start = time.perf_counter()
-    if A is not None and b is not None and len(A):
-        if A.ndim != 2 or b.shape != (A.shape[0],):
-            raise qpsolvers.ProblemError(f"inconsistent A x = b: {A.shape=}, {b.shape=}")
-        G, h = np.vstack([G, A]), np.concatenate([h, b])
-    rows = G.shape[0]
-    lower = np.full(rows, -1e30)
-    sense = np.zeros(rows, dtype=np.intc)
-    sense[inequalities:] = 5
-    solve_start = time.perf_counter()
-    x, objective, exitflag, info = _daqp_solve(P, q, G, h, lower, sense, **settings)
-    solve_end = time.perf_counter()
-    solution = qpsolvers.Solution(problem)
-    solution.found = exitflag > 0
-    if exitflag > 0:
-        solution.x = x
-        solution.obj = objective
-        solution.z_box = info["lam"][:0]
-        solution.z = info["lam"][:inequalities]
-        solution.y = info["lam"][inequalities:]
-    solution.build_time = solve_start - build_start
-    solution.solve_time = solve_end - solve_start
-    return solution
 
 
 @dataclass
@@ -1000,7 +873,7 @@ def _solve_qp(
     The chosen solver first (with its retry settings), then, with
     ``fallbacks``, the other tested solvers: an active-set solver stalling on a
     degenerate vertex does not make the problem infeasible. Each call is capped in
-    iterations (:func:`solve_qp_bounded`). With ``first`` (the level's first curvature) each
+    iterations (:func:`~.qp.solve_qp_bounded`). With ``first`` (the level's first curvature) each
     solver's first settings always run; retry settings, and every attempt without
     ``first``, only while ``clock``'s budget lasts.
     """

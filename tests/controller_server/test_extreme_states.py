@@ -24,11 +24,10 @@ from controller_server.models import load_robot_model
 from controller_server.session import Session
 from controller_server.solvers import prioritized
 from controller_server.solvers.prioritized import (
-    QP_ITERATION_LIMITS,
     qp_data_limit,
     solve_prioritized,
-    solve_qp_bounded,
 )
+from controller_server.solvers.qp import QP_ITERATION_LIMITS, solve_qp_bounded
 from protocol.errors import ErrorCode
 from protocol.messages import Hello, SetParams
 
