@@ -1,0 +1,1 @@
+"""Actuator protocols: pure encode/decode functions, and a thin I/O layer each (an ActuatorBus)."""
