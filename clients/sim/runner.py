@@ -41,6 +41,7 @@ from protocol.messages import Command, Diagnostics, Welcome
 __all__ = [
     "FALL_TILT_RAD",
     "RunRecord",
+    "fall_reason",
     "make_backend",
     "run_scenario",
     "standing_state",
@@ -138,7 +139,8 @@ class RunRecord:
         return self.simulated_s / self.wall_time_s if self.wall_time_s > 0 else float("nan")
 
 
-def _fall_reason(state: RobotState, standing_height_m: float, non_foot_contact: bool) -> str:
+def fall_reason(state: RobotState, standing_height_m: float, non_foot_contact: bool) -> str:
+    """Why the robot in ``state`` has fallen, or ``""`` if it has not."""
     if non_foot_contact:
         return "non-foot contact with the ground"
     if state.position_base_in_world[2] < FALL_HEIGHT_FRACTION * standing_height_m:
@@ -272,7 +274,7 @@ def run_scenario(
                 record.commands.append(command)
                 record.contact_flags.append(flags)
                 state = backend.state()  # after the step: checked now, sent next tick
-                reason = _fall_reason(state, standing_height_m, non_foot_contact)
+                reason = fall_reason(state, standing_height_m, non_foot_contact)
                 if reason:
                     record.fell, record.fall_time_s = True, backend.time_s
                     record.fall_reason = reason

@@ -13,7 +13,8 @@ from __future__ import annotations
 import difflib
 import tomllib
 from pathlib import Path
-from typing import Any, Literal
+from types import UnionType
+from typing import Any, Literal, Union, get_args, get_origin
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -182,26 +183,45 @@ def _check_push_bodies(name: str, scenario: Scenario, bodies: list[str]) -> None
             )
 
 
-_RECORDS: dict[str, type[BaseModel]] = {"pushes": PushSpec, "param_changes": ParamChange}
-"""List-valued keys of a scenario whose items are records with keys of their own."""
+def explain(error: ValidationError, root: type[BaseModel] | None = None) -> str:
+    """A file's validation errors on one line, each with what to write instead.
 
+    An unknown key gets the closest known key of the table it is in ("did
+    you mean"), a joint position given as a number the shape it needs; the
+    others pydantic's message, the key path and the value given.
 
-def explain(error: ValidationError) -> str:
-    """A scenario's validation errors on one line, each with what to write instead.
-
-    An unknown key gets the closest known key ("did you mean"), a joint
-    position given as a number the shape it needs; the others pydantic's
-    message, the key path and the value given.
+    Args:
+        error: What pydantic found.
+        root: The model the whole file validates as (default :class:`Scenario`).
     """
-    return "; ".join(_explain_one(details) for details in error.errors())
+    root = Scenario if root is None else root
+    return "; ".join(_explain_one(details, root) for details in error.errors())
 
 
-def _explain_one(details: Any) -> str:
+def _record_at(root: type[BaseModel], location: tuple[Any, ...]) -> type[BaseModel]:
+    """The model of the table at ``location`` (field names, list indices, dict keys)."""
+    current: Any = root
+    for part in location:
+        if isinstance(current, type) and issubclass(current, BaseModel):
+            field = current.model_fields.get(str(part))
+            if field is None:
+                return root
+            current = field.annotation
+        else:  # an item of a list or a value of a dict: its (last) type argument
+            arguments = [arg for arg in get_args(current) if arg is not type(None)]
+            current = arguments[-1] if arguments else None
+        # list[X] | None: unwrap the optional
+        arguments = [arg for arg in get_args(current) if arg is not type(None)]
+        if get_origin(current) in (Union, UnionType) and len(arguments) == 1:
+            current = arguments[0]
+    return current if isinstance(current, type) and issubclass(current, BaseModel) else root
+
+
+def _explain_one(details: Any, root: type[BaseModel]) -> str:
     location = tuple(details["loc"])
     where = ".".join(str(part) for part in location)
     if details["type"] == "extra_forbidden":
-        record = _RECORDS.get(str(location[0]), Scenario) if len(location) > 1 else Scenario
-        known = list(record.model_fields)
+        known = list(_record_at(root, location[:-1]).model_fields)
         close = difflib.get_close_matches(str(location[-1]), known, n=1)
         hint = f"did you mean {close[0]!r}?" if close else f"known keys: {', '.join(known)}"
         return f"unknown key {where!r}; {hint}"

@@ -1,0 +1,260 @@
+"""The actuator map: which actuator drives which joint, and how (TOML, validated by pydantic).
+
+A bridge file has three parts (example: ``examples/bridge/revolute_humanoid_mit.toml``;
+every key: ``docs/bridge.md``):
+
+- ``[bridge]``: the server session (model, controller, parameters), the loop
+  rate, the host watchdog, and the safety settings;
+- ``[buses.NAME]``: one CAN channel or Dynamixel port and the protocol its
+  actuators speak;
+- ``[joints.NAME]``: per joint of the robot, its bus, actuator id, motor
+  model, gearing (ratio, direction, zero offset) and limits.
+
+An optional ``[emulation]`` says how ``poise bridge --emulate`` simulates
+the robot behind emulated actuators. The map is checked against the
+server's announced joints at start (:func:`check_against_welcome`).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from clients.sim.scenario import PushSpec, explain
+from protocol.errors import PoiseError
+from protocol.messages import Welcome
+
+__all__ = [
+    "BridgeConfig",
+    "BridgeConfigError",
+    "BridgeSettings",
+    "BusSpec",
+    "EmulationSpec",
+    "JointActuator",
+    "check_against_welcome",
+    "load_bridge_config",
+]
+
+Protocol = Literal["mit", "damiao", "odrive", "dynamixel"]
+CAN_PROTOCOLS = ("mit", "damiao", "odrive")
+
+
+class BridgeConfigError(PoiseError, ValueError):
+    """A bridge file cannot be used; the one-line message says what to change."""
+
+
+class _Record(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class BridgeSettings(_Record):
+    """The ``[bridge]`` table: session, loop and safety settings."""
+
+    model: str = Field(default="revolute_humanoid", description="Server model (built-in or path).")
+    controller: str = Field(default="momentum", description="Server controller.")
+    params: dict[str, Any] = Field(default_factory=dict, description="Controller parameters.")
+    rate_hz: float = Field(default=500.0, ge=200.0, le=1000.0, description="Loop rate (Hz).")
+    duration_s: float = Field(
+        default=0.0, ge=0.0, description="Stop after this long (s); 0 runs until stopped."
+    )
+    watchdog_s: float = Field(
+        default=0.05,
+        gt=0.0,
+        le=1.0,
+        description="No valid command from the server for this long (s) latches the safe state.",
+    )
+    actuator_watchdog_s: float = Field(
+        default=0.2,
+        ge=0.0,
+        le=2.5,
+        description="The actuators' own watchdogs (s; 0: not armed); longer than watchdog_s.",
+    )
+    safe_damping_Nm_s_per_rad: float = Field(
+        default=2.0,
+        ge=0.0,
+        description="Joint-side damping of the MIT/Damiao safe state (kp = 0, τ = 0).",
+    )
+    max_missed_replies: int = Field(
+        default=5, ge=1, description="An actuator silent this many ticks in a row latches safe."
+    )
+    position_margin_rad: float = Field(
+        default=0.05,
+        ge=0.0,
+        description="A joint beyond its position limits by more than this latches safe (rad).",
+    )
+    torque_scale: float = Field(
+        default=1.0, gt=0.0, le=1.0, description="Scales every torque (bring-up on a stand)."
+    )
+    base_state: Literal["simulator", "fixed"] = Field(
+        default="fixed",
+        description="Where the base pose and twist come from: `simulator` (ground truth, "
+        "--emulate only) or `fixed` (at rest at the standing pose: a robot on a stand).",
+    )
+    support_force_threshold_N: float = Field(
+        default=20.0, ge=0.0, description="Simulator base state: a foot supports above this (N)."
+    )
+
+    @model_validator(mode="after")
+    def _watchdogs(self) -> BridgeSettings:
+        if self.actuator_watchdog_s and self.actuator_watchdog_s <= self.watchdog_s:
+            raise ValueError(
+                f"actuator_watchdog_s ({self.actuator_watchdog_s}) must exceed watchdog_s "
+                f"({self.watchdog_s}): the host watchdog acts first, the actuators' own last"
+            )
+        return self
+
+
+class BusSpec(_Record):
+    """One ``[buses.NAME]`` table: a CAN channel or a Dynamixel serial port."""
+
+    protocol: Protocol = Field(description="What its actuators speak.")
+    interface: str = Field(default="socketcan", description="python-can interface (CAN).")
+    channel: str = Field(default="can0", description="python-can channel (CAN).")
+    bitrate: int = Field(default=1_000_000, gt=0, description="CAN bit rate (bit/s).")
+    port: str = Field(default="/dev/ttyUSB0", description="Serial port (Dynamixel).")
+    baudrate: int = Field(default=1_000_000, gt=0, description="Serial baud rate (Dynamixel).")
+    reply_timeout_s: float = Field(
+        default=0.002, gt=0.0, le=0.1, description="Wait for actuator replies per tick (s)."
+    )
+
+    @property
+    def is_can(self) -> bool:
+        """Whether it is a CAN bus (python-can)."""
+        return self.protocol in CAN_PROTOCOLS
+
+
+class JointActuator(_Record):
+    """One ``[joints.NAME]`` table: the actuator of a joint, and the joint's limits.
+
+    The motor side relates to the joint side by
+    ``q_joint = direction · q_motor / gear_ratio + zero_offset_rad``, so
+    ``τ_motor = direction · τ_joint / gear_ratio`` (lossless gearing).
+    """
+
+    bus: str = Field(description="Name of its `[buses.NAME]` table.")
+    id: int = Field(ge=0, le=0x7FF, description="Actuator id on the bus (CAN id, node, servo).")
+    motor: str = Field(default="", description="Motor model (its protocol's catalogue).")
+    master_id: int | None = Field(
+        default=None, ge=0, le=0x7FF, description="Damiao: the id it replies on."
+    )
+    gear_ratio: float = Field(default=1.0, gt=0.0, description="Motor turns per joint turn.")
+    direction: Literal[-1, 1] = Field(default=1, description="+1 or −1.")
+    zero_offset_rad: float = Field(default=0.0, description="Joint angle at motor zero (rad).")
+    torque_limit_Nm: float | None = Field(
+        default=None, gt=0.0, description="Joint side (N·m); default: the model's limit."
+    )
+    position_limit_rad: tuple[float, float] | None = Field(
+        default=None, description="Joint [lower, upper] (rad); default: the model's limits."
+    )
+    velocity_limit_rad_s: float = Field(default=20.0, gt=0.0, description="Joint side (rad/s).")
+    derate_above_C: float = Field(
+        default=70.0, description="Torque limit falls linearly from here (°C) …"
+    )
+    temperature_limit_C: float = Field(default=90.0, description="… to 0 here (°C): safe state.")
+
+    @model_validator(mode="after")
+    def _ranges(self) -> JointActuator:
+        if self.position_limit_rad is not None:
+            lower, upper = self.position_limit_rad
+            if not lower < upper:
+                raise ValueError(f"position_limit_rad [{lower}, {upper}]: lower ≥ upper")
+        if not self.derate_above_C < self.temperature_limit_C:
+            raise ValueError(
+                f"derate_above_C ({self.derate_above_C}) must be below temperature_limit_C "
+                f"({self.temperature_limit_C})"
+            )
+        return self
+
+
+class EmulationSpec(_Record):
+    """The ``[emulation]`` table: the simulated robot behind ``poise bridge --emulate``."""
+
+    backend: Literal["reference", "mujoco"] = Field(default="reference")
+    physics_rate_hz: float = Field(default=2000.0, gt=0.0, le=100_000.0)
+    friction_coefficient: float = Field(default=0.8, gt=0.0, le=5.0)
+    pushes: list[PushSpec] = Field(default_factory=list)
+
+
+class BridgeConfig(_Record):
+    """A whole bridge file."""
+
+    bridge: BridgeSettings = Field(default_factory=BridgeSettings)
+    buses: dict[str, BusSpec] = Field(description="Buses by name.")
+    joints: dict[str, JointActuator] = Field(description="Actuators by joint name.")
+    emulation: EmulationSpec = Field(default_factory=EmulationSpec)
+
+    @model_validator(mode="after")
+    def _references(self) -> BridgeConfig:
+        seen: dict[tuple[str, int], str] = {}
+        for joint, actuator in self.joints.items():
+            if actuator.bus not in self.buses:
+                raise ValueError(
+                    f"joints.{joint}.bus = {actuator.bus!r}: no such bus; buses: "
+                    f"{', '.join(self.buses) or '(none)'}"
+                )
+            key = (actuator.bus, actuator.id)
+            if key in seen:
+                raise ValueError(
+                    f"joints.{joint} and joints.{seen[key]} share id {actuator.id} on bus "
+                    f"{actuator.bus!r}"
+                )
+            seen[key] = joint
+            if self.buses[actuator.bus].protocol == "damiao" and actuator.master_id is None:
+                raise ValueError(f"joints.{joint}: a Damiao actuator needs master_id")
+        return self
+
+    def joints_on(self, bus: str) -> dict[str, JointActuator]:
+        """The joints whose actuators are on ``bus``, in file order."""
+        return {name: actuator for name, actuator in self.joints.items() if actuator.bus == bus}
+
+
+def load_bridge_config(path: str | Path) -> BridgeConfig:
+    """Read and validate a bridge file.
+
+    Raises:
+        BridgeConfigError: No such file, not TOML, an unknown key (with the
+            closest known one), a value out of range, a joint on a bus that
+            does not exist, or two actuators with one id on one bus.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise BridgeConfigError(f"no bridge file {str(path)!r}")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise BridgeConfigError(f"bridge file {str(path)!r} is not valid TOML: {exc}") from exc
+    try:
+        return BridgeConfig.model_validate(data)
+    except ValidationError as exc:
+        raise BridgeConfigError(f"bridge file {str(path)!r}: {explain(exc, BridgeConfig)}") from exc
+
+
+def check_against_welcome(config: BridgeConfig, welcome: Welcome) -> None:
+    """Refuse a map that does not match the joints the server announced.
+
+    Every announced joint must have an actuator, every mapped joint must
+    exist, and every one must be a one-DoF joint (a ball joint has no single
+    actuator).
+
+    Raises:
+        BridgeConfigError: Naming the unmapped, unknown or multi-DoF joints.
+    """
+    announced = [joint.name for joint in welcome.joints]
+    problems = []
+    unmapped = [name for name in announced if name not in config.joints]
+    if unmapped:
+        problems.append(f"no actuator for {', '.join(unmapped)}")
+    unknown = [name for name in config.joints if name not in announced]
+    if unknown:
+        problems.append(f"{welcome.model_name} has no joint {', '.join(unknown)}")
+    multi = [joint.name for joint in welcome.joints if joint.nv != 1]
+    if multi:
+        problems.append(f"{', '.join(multi)} have several DoF (one actuator drives one DoF)")
+    if problems:
+        raise BridgeConfigError(
+            f"the actuator map does not match {welcome.model_name}: {'; '.join(problems)} "
+            f"(its joints: {', '.join(announced)})"
+        )

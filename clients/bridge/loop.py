@@ -1,0 +1,487 @@
+"""The bridge loop: read the actuators, step the server, command the actuators, safely.
+
+One tick (``rate_hz``, 200 Hz–1 kHz):
+
+1. every bus sends the commands decided last tick
+   (:meth:`~clients.bridge.actuator.ActuatorBus.exchange`) and returns each actuator's feedback (one
+   frame each way per actuator: the MIT-mode pattern);
+2. the feedback is checked (faults, silence, limits, temperature) and
+   turned into joint positions and velocities; the base state comes from a
+   :class:`~clients.bridge.base_state.BaseStateSource`;
+3. the state goes to the server. The torques it returns act from the next
+   tick's exchange on, so the state sent is the one predicted one period
+   ahead (as ``poise sim`` does with ``command_delay_ticks = 1``);
+4. the torques are checked (finite, one per joint), clamped to the derated
+   limits, and converted to motor commands for step 1 of the next tick;
+5. the pacer waits for the next tick (the wall clock, or a simulated plant).
+
+Start-up reads every actuator with a zero command before enabling any, so
+enabling cannot kick. Any reason of :mod:`clients.bridge.safety` latches
+the safe state, which holds until the operator re-arms (``rearm``); the
+bridge logs one line saying why. An e-stop (``estop``, SIGINT, SIGTERM)
+latches it and ends the run; every actuator is disabled on the way out.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+import pinocchio as pin
+
+from clients.bridge.actuator import ZERO_COMMAND, ActuatorBus, BusError, MotorCommand, MotorFeedback
+from clients.bridge.base_state import BaseStateSource
+from clients.bridge.config import BridgeSettings
+from clients.bridge.joint_map import JointMap
+from clients.bridge.safety import (
+    InvalidCommand,
+    SafetyLatch,
+    Watchdog,
+    check_feedback,
+    check_joints,
+    clamp_torque,
+)
+from clients.client import ControllerClient, ServerError, ServerTimeout
+from clients.state import RobotState
+from protocol.errors import PoiseError
+from protocol.messages import Command
+
+__all__ = ["Bridge", "BridgeReport", "BridgeStartError", "JointLink", "LoopTiming", "Pacer"]
+
+log = logging.getLogger("poise.bridge")
+
+START_READ_ATTEMPTS = 3
+"""Zero-command reads at start-up before a silent actuator refuses the start."""
+
+
+class BridgeStartError(PoiseError, RuntimeError):
+    """The bridge cannot start: an actuator is silent, faulted or out of its limits."""
+
+
+class Pacer(Protocol):
+    """What the loop waits on between ticks (wall clock or simulated plant)."""
+
+    period_s: float
+
+    def now_s(self) -> float:
+        """Time (s) of the loop's clock."""
+        ...
+
+    def wait(self) -> bool:
+        """Wait for the next tick; True if it was already late (an overrun)."""
+        ...
+
+
+@dataclass
+class LoopTiming:
+    """Tick periods measured on the wall clock (``time.perf_counter``)."""
+
+    ticks: int = 0
+    overruns: int = 0
+    period_sum_s: float = 0.0
+    period_squares_s2: float = 0.0
+    period_max_s: float = 0.0
+    work_max_s: float = 0.0
+
+    def add(self, period_s: float, work_s: float) -> None:
+        """One tick: time since the previous tick's start, and its own work."""
+        self.ticks += 1
+        self.period_sum_s += period_s
+        self.period_squares_s2 += period_s * period_s
+        self.period_max_s = max(self.period_max_s, period_s)
+        self.work_max_s = max(self.work_max_s, work_s)
+
+    @property
+    def period_mean_s(self) -> float:
+        """Mean period."""
+        return self.period_sum_s / self.ticks if self.ticks else math.nan
+
+    @property
+    def jitter_s(self) -> float:
+        """Standard deviation of the period."""
+        if self.ticks < 2:
+            return math.nan
+        mean = self.period_mean_s
+        return math.sqrt(max(0.0, self.period_squares_s2 / self.ticks - mean * mean))
+
+
+@dataclass
+class JointLink:
+    """Link quality of one joint's actuator."""
+
+    joint: str
+    bus: str
+    id: int
+    replies: int = 0
+    missed: int = 0
+    faults: int = 0
+    last_fault: str = ""
+    temperature_C: float = math.nan
+    temperature_max_C: float = math.nan
+
+    def add(self, reply: MotorFeedback | None) -> None:
+        """Count one tick's reply."""
+        if reply is None:
+            self.missed += 1
+            return
+        self.replies += 1
+        if reply.fault:
+            self.faults += 1
+            self.last_fault = reply.fault
+        if reply.temperature_C is not None:
+            self.temperature_C = reply.temperature_C
+            self.temperature_max_C = np.fmax(self.temperature_max_C, reply.temperature_C)
+
+
+@dataclass
+class BridgeReport:
+    """What a run did: ticks, timing, link quality, and why it stopped or latched."""
+
+    timing: LoopTiming = field(default_factory=LoopTiming)
+    links: list[JointLink] = field(default_factory=list)
+    commands: int = 0
+    invalid_commands: int = 0
+    server_timeouts: int = 0
+    clamped_torques: int = 0
+    latches: list[str] = field(default_factory=list)
+    """Every reason the safe state latched, in order."""
+    stopped: str = ""
+    """Why the run ended: ``"duration"``, ``"quit"``, ``"estop"``, ``"interrupted"``."""
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready summary (``report.json``)."""
+        timing = self.timing
+        return {
+            "ticks": timing.ticks,
+            "period_mean_ms": 1e3 * timing.period_mean_s,
+            "jitter_ms": 1e3 * timing.jitter_s,
+            "period_max_ms": 1e3 * timing.period_max_s,
+            "work_max_ms": 1e3 * timing.work_max_s,
+            "overruns": timing.overruns,
+            "commands": self.commands,
+            "invalid_commands": self.invalid_commands,
+            "server_timeouts": self.server_timeouts,
+            "clamped_torques": self.clamped_torques,
+            "latches": self.latches,
+            "stopped": self.stopped,
+            "links": [vars(link) for link in self.links],
+        }
+
+
+class Bridge:
+    """Drives one robot's actuators from one server session.
+
+    Args:
+        settings: The ``[bridge]`` table.
+        joint_map: Joints in wire order and their actuators.
+        buses: Every bus by name, open.
+        client: Connected client (``connect`` done, welcome checked).
+        base: Where the base state comes from.
+        pacer: What the loop waits on between ticks.
+        model: Pinocchio model of the robot (free-flyer root, wire order) for
+            the one-period prediction of the state sent.
+        operator: Operator commands (``"estop"``, ``"rearm"``, ``"quit"``),
+            read once per tick.
+        connect_timeout_s: How long a re-arm waits for the server's handshake.
+    """
+
+    def __init__(
+        self,
+        settings: BridgeSettings,
+        joint_map: JointMap,
+        buses: Mapping[str, ActuatorBus],
+        client: ControllerClient,
+        base: BaseStateSource,
+        pacer: Pacer,
+        model: pin.Model,
+        operator: queue.Queue[str] | None = None,
+        connect_timeout_s: float = 10.0,
+    ):
+        self.connect_timeout_s = connect_timeout_s
+        self.settings = settings
+        self.joint_map = joint_map
+        self.buses = dict(buses)
+        self.client = client
+        self.base = base
+        self.pacer = pacer
+        self.model = model
+        self.operator: queue.Queue[str] = operator if operator is not None else queue.Queue()
+        self.latch = SafetyLatch()
+        self.watchdog = Watchdog(settings.watchdog_s)
+        self.report = BridgeReport(
+            links=[JointLink(ref.joint, ref.bus, ref.id) for ref in joint_map.actuators]
+        )
+        n = len(joint_map)
+        self.joint_position_rad = np.zeros(n)
+        self.joint_velocity_rad_s = np.zeros(n)
+        self.temperature_C = np.full(n, np.nan)
+        self._missed_in_a_row = np.zeros(n, dtype=int)
+        self._damping = joint_map.motor_damping(settings.safe_damping_Nm_s_per_rad)
+        self._commands = self._zero_commands()
+        self._held: Command | None = None
+        self._enabled = False
+
+    def _zero_commands(self) -> dict[str, dict[int, MotorCommand]]:
+        return {
+            bus: {ref.id: ZERO_COMMAND for ref in self.joint_map.actuators if ref.bus == bus}
+            for bus in self.buses
+        }
+
+    # --- start-up and shutdown -------------------------------------------------
+
+    def start(self) -> None:
+        """Read every actuator with a zero command, check, arm watchdogs, enable.
+
+        Raises:
+            BridgeStartError: An actuator stays silent, reports a fault after
+                one clear, or its joint is outside its limits.
+            BusError: A bus failed.
+        """
+        self._commands = self._zero_commands()
+        feedback = self._read_all_with_zero()
+        faulted = [i for i, reply in enumerate(feedback) if reply is not None and reply.fault]
+        if faulted:
+            for bus in self.buses.values():
+                bus.clear_faults()
+            feedback = self._read_all_with_zero()
+        self._absorb(feedback)
+        reason = (
+            check_feedback(self.joint_map, feedback, np.zeros(len(self.joint_map), dtype=int), 1)
+            or self._check_joints()
+        )
+        if reason:
+            raise BridgeStartError(f"not starting: {reason}")
+        if self.settings.actuator_watchdog_s > 0.0:
+            for bus in self.buses.values():
+                bus.arm_watchdog(self.settings.actuator_watchdog_s)
+        for bus in self.buses.values():
+            bus.enable()
+        self._enabled = True
+        self._absorb(self._exchange(self._commands))
+        self._held = None
+        self.watchdog.feed()
+        log.info("enabled %d actuators on %d buses", len(self.joint_map), len(self.buses))
+
+    def _read_all_with_zero(self) -> list[MotorFeedback | None]:
+        feedback: list[MotorFeedback | None] = []
+        for _ in range(START_READ_ATTEMPTS):
+            feedback = self._exchange(self._commands)
+            if all(reply is not None for reply in feedback):
+                return feedback
+        silent = [
+            f"{ref.joint} (bus {ref.bus!r}, id {ref.id})"
+            for ref, reply in zip(self.joint_map.actuators, feedback, strict=True)
+            if reply is None
+        ]
+        raise BridgeStartError(
+            f"not starting: no reply from {', '.join(silent)} to {START_READ_ATTEMPTS} zero "
+            "commands; check power, wiring, ids and the bus's bit rate"
+        )
+
+    def shutdown(self) -> None:
+        """Disable every actuator (best effort on each bus, one line per failure)."""
+        for name, bus in self.buses.items():
+            try:
+                bus.disable()
+            except BusError as exc:
+                log.error("could not disable the actuators of bus %r: %s", name, exc.detail)
+        self._enabled = False
+
+    # --- the loop ----------------------------------------------------------------
+
+    def run(self, duration_s: float = 0.0) -> BridgeReport:
+        """Start, loop until the duration, ``quit`` or an e-stop, and disable.
+
+        ``duration_s`` = 0 runs until stopped. Ctrl-C or SIGTERM (as
+        ``KeyboardInterrupt``) is an e-stop.
+        """
+        try:
+            self.start()
+            end_s = self.pacer.now_s() + duration_s if duration_s > 0 else math.inf
+            previous_s = time.perf_counter()
+            while not self.report.stopped:
+                tick_s = time.perf_counter()
+                self._operator_commands()
+                if self.report.stopped:
+                    break
+                self.tick()
+                work_s = time.perf_counter() - tick_s
+                if self.pacer.now_s() >= end_s - 1e-9:
+                    self.report.stopped = "duration"
+                    break
+                self.report.timing.overruns += self.pacer.wait()
+                now = time.perf_counter()
+                self.report.timing.add(now - previous_s, work_s)
+                previous_s = now
+        except KeyboardInterrupt:
+            self.estop("interrupted (SIGINT/SIGTERM)")
+            self.report.stopped = "interrupted"
+        finally:
+            self.shutdown()
+        return self.report
+
+    def estop(self, why: str) -> None:
+        """Latch the safe state now and command it once (the run then ends)."""
+        self._trip(f"e-stop: {why}")
+        try:
+            self._hold_safe()
+        except BusError as exc:
+            log.error("e-stop: %s", exc)
+
+    def _operator_commands(self) -> None:
+        while True:
+            try:
+                command = self.operator.get_nowait().strip().lower()
+            except queue.Empty:
+                return
+            if command == "estop":
+                self.estop("operator")
+                self.report.stopped = "estop"
+            elif command == "quit":
+                self.report.stopped = "quit"
+            elif command == "rearm":
+                self.rearm()
+            elif command:
+                log.warning("unknown operator command %r (estop, rearm, quit)", command)
+
+    def rearm(self) -> None:
+        """Leave the safe state: the operator's decision, never the bridge's.
+
+        The start-up sequence runs again (zero command, checks, enable); if
+        it fails the safe state stays latched with the new reason.
+        """
+        if not self.latch.latched:
+            return
+        reason = self.latch.rearm()
+        log.warning("re-armed by the operator (was: %s)", reason)
+        try:
+            self.client.timeout_s = self.connect_timeout_s
+            self.client.reconnect()  # a fresh session: the server may have restarted
+            self.start()
+        except (BridgeStartError, BusError, ServerTimeout, ServerError) as exc:
+            self._trip(f"re-arm failed: {exc}")
+
+    def tick(self) -> None:
+        """One tick: exchange, check, step the server, decide the next commands."""
+        if self.latch.latched:
+            self._hold_safe()
+            return
+        try:
+            feedback = self._exchange(self._commands)
+        except BusError as exc:
+            self._trip(str(exc))
+            return
+        self._absorb(feedback)
+        reason = (
+            check_feedback(
+                self.joint_map, feedback, self._missed_in_a_row, self.settings.max_missed_replies
+            )
+            or self._check_joints()
+        )
+        if reason:
+            self._trip(reason)
+            self._hold_safe()
+            return
+        command = self._step_server()
+        if command is None:
+            if self.watchdog.remaining_s() <= 0.0 and not self.latch.latched:
+                self._trip(
+                    f"no valid command from the server for {self.settings.watchdog_s:g} s "
+                    "(the watchdog)"
+                )
+            if self.latch.latched:
+                self._hold_safe()
+            return  # the previous valid commands stay for one more tick
+        limit = self.joint_map.derated_torque_limit_Nm(self.temperature_C)
+        try:
+            torque, clamped = clamp_torque(
+                self.settings.torque_scale * np.asarray(command.joint_torque),
+                limit,
+                self.joint_map.names,
+            )
+        except InvalidCommand as exc:
+            self.report.invalid_commands += 1
+            log.warning("refused the server's command for seq %d: %s", command.seq, exc)
+            return
+        self.report.clamped_torques += len(clamped)
+        self._commands = self.joint_map.torque_commands(torque)
+        self._held = command
+        self.report.commands += 1
+        self.watchdog.feed()
+
+    def _step_server(self) -> Command | None:
+        """Send this tick's state; the server's command, or None (counted, logged)."""
+        reading = self.base.read()
+        measured = RobotState(
+            self.joint_position_rad.copy(),
+            self.joint_velocity_rad_s.copy(),
+            reading.position_base_in_world,
+            reading.orientation_base_in_world_xyzw,
+            reading.linear_velocity_base_in_world,
+            reading.angular_velocity_base_in_base,
+        )
+        period_s = self.pacer.period_s
+        time_s = self.pacer.now_s()
+        sent = measured
+        if self._held is not None:  # the command decided now acts from the next tick
+            sent = measured.predicted(period_s, self.model, self._held)
+            time_s += period_s
+        remaining_s = self.watchdog.remaining_s()
+        if remaining_s <= 0.0:
+            return None
+        self.client.timeout_s = remaining_s
+        try:
+            self.client.send_state(sent.to_message(time_s, reading.contact_flags))
+            command = self.client.receive_command()
+        except ServerTimeout:
+            self.report.server_timeouts += 1
+            return None
+        except ServerError as exc:
+            self.report.invalid_commands += 1
+            log.warning("the server refused the state: %s %s", exc.code.name, exc.detail)
+            return None
+        return command
+
+    def _exchange(
+        self, commands: Mapping[str, Mapping[int, MotorCommand]]
+    ) -> list[MotorFeedback | None]:
+        feedback = {name: bus.exchange(commands[name]) for name, bus in self.buses.items()}
+        replies = self.joint_map.gather(feedback)
+        for link, reply in zip(self.report.links, replies, strict=True):
+            link.add(reply)
+        return replies
+
+    def _hold_safe(self) -> None:
+        feedback = {name: bus.hold_safe(self._damping[name]) for name, bus in self.buses.items()}
+        replies = self.joint_map.gather(feedback)
+        for link, reply in zip(self.report.links, replies, strict=True):
+            link.add(reply)
+        self._absorb(replies)
+
+    def _check_joints(self) -> str:
+        return check_joints(
+            self.joint_map,
+            self.joint_position_rad,
+            self.joint_velocity_rad_s,
+            self.temperature_C,
+            self.settings.position_margin_rad,
+        )
+
+    def _absorb(self, feedback: list[MotorFeedback | None]) -> None:
+        q, v, temperature = self.joint_map.joint_state(
+            feedback, (self.joint_position_rad, self.joint_velocity_rad_s)
+        )
+        self.joint_position_rad, self.joint_velocity_rad_s = q, v
+        known = ~np.isnan(temperature)
+        self.temperature_C[known] = temperature[known]
+
+    def _trip(self, reason: str) -> None:
+        if self.latch.trip(reason, self.pacer.now_s()):
+            self.report.latches.append(reason)
+            log.error("safe state latched: %s; re-arm to resume", reason)
