@@ -159,8 +159,8 @@ class BridgeReport:
         timing = self.timing
         return {
             "ticks": timing.ticks,
-            "period_mean_ms": 1e3 * timing.period_mean_s,
-            "jitter_ms": 1e3 * timing.jitter_s,
+            "period_mean_ms": _finite(1e3 * timing.period_mean_s),
+            "jitter_ms": _finite(1e3 * timing.jitter_s),
             "period_max_ms": 1e3 * timing.period_max_s,
             "work_max_ms": 1e3 * timing.work_max_s,
             "overruns": timing.overruns,
@@ -170,8 +170,15 @@ class BridgeReport:
             "clamped_torques": self.clamped_torques,
             "latches": self.latches,
             "stopped": self.stopped,
-            "links": [vars(link) for link in self.links],
+            "links": [
+                {key: None if value != value else value for key, value in vars(link).items()}
+                for link in self.links
+            ],  # NaN (no temperature reported) → null
         }
+
+
+def _finite(value: float) -> float | None:
+    return value if math.isfinite(value) else None
 
 
 class Bridge:

@@ -111,12 +111,18 @@ def check_joints(
     position_rad: np.ndarray,
     velocity_rad_s: np.ndarray,
     temperature_C: np.ndarray,
+    margin_rad: float = 0.0,
 ) -> str:
-    """The first joint out of its position, velocity or temperature limit, as a reason."""
+    """The first joint out of its position, velocity or temperature limit, as a reason.
+
+    A position counts as out once it is beyond a limit by more than
+    ``margin_rad`` (encoder quantization puts a joint resting on its end stop
+    a hair outside).
+    """
     names = joint_map.names
     for i in np.flatnonzero(
-        (position_rad < joint_map.position_lower_rad)
-        | (position_rad > joint_map.position_upper_rad)
+        (position_rad < joint_map.position_lower_rad - margin_rad)
+        | (position_rad > joint_map.position_upper_rad + margin_rad)
     ):
         return (
             f"{names[i]} at {position_rad[i]:.3f} rad is outside its limits "

@@ -17,7 +17,7 @@ import sys
 from collections.abc import Sequence
 
 from controller_server.blas import default_to_single_threaded_blas
-from controller_server.cli import listing, logs, runs, serve
+from controller_server.cli import bridge, listing, logs, runs, serve
 from controller_server.cli.common import CONTROLLER_NAMES, UsageError, as_usage_error
 
 __all__ = ["CONTROLLER_NAMES", "UsageError", "build_parser", "main"]
@@ -41,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="show the traceback of an error instead of its one-line message",
     )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for group in (serve, runs, logs, listing):
+    for group in (serve, runs, bridge, logs, listing):
         group.add_parsers(commands)
     return parser
 

@@ -41,12 +41,24 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     """
     if isinstance(exc, UsageError):
         return exc
+    from clients.bridge.actuator import BusError
+    from clients.bridge.config import BridgeConfigError
+    from clients.bridge.loop import BridgeStartError
     from clients.client import ServerTimeout
     from clients.sim.errors import ScenarioError
     from clients.sim.output import OutputBusy
     from protocol.endpoints import InvalidEndpoint
 
-    if isinstance(exc, ScenarioError | InvalidEndpoint | ServerTimeout | OutputBusy):
+    if isinstance(
+        exc,
+        ScenarioError
+        | InvalidEndpoint
+        | ServerTimeout
+        | OutputBusy
+        | BridgeConfigError
+        | BridgeStartError
+        | BusError,
+    ):
         return UsageError(str(exc))
     return None
 

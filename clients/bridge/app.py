@@ -1,0 +1,191 @@
+"""``poise bridge``: connect, check the map, open the buses, run the loop, report.
+
+With ``emulate``, every bus of the map is served by emulated actuators
+(virtual CAN channels and pseudo-terminals instead of the configured
+interfaces) on a simulated robot, which the loop paces: the whole stack
+runs as on hardware, minus the hardware.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import sys
+import threading
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pinocchio as pin
+
+from clients.bridge.base_state import BaseStateSource, FixedBase, SimulatorBase
+from clients.bridge.buses import check_motors, open_buses
+from clients.bridge.config import BridgeConfig, BridgeConfigError, check_against_welcome
+from clients.bridge.joint_map import JointMap
+from clients.bridge.loop import Bridge, BridgeReport, Pacer
+from clients.bridge.plant import RealTimePacer
+from clients.client import ControllerClient, CurveKeys
+from clients.sim.model_file import hello_model, resolve_model_path
+
+__all__ = ["BridgeRun", "format_report", "run_bridge", "stdin_operator"]
+
+log = logging.getLogger("poise.bridge")
+
+DIAGNOSTICS_PERIOD_TICKS = 100
+"""The bridge asks for diagnostics every this many ticks (they cost the server time)."""
+
+
+@dataclass
+class BridgeRun:
+    """A finished run: the loop's report, and with emulation what the robot did."""
+
+    report: BridgeReport
+    emulated: bool = False
+    fall_reason: str = ""
+    fall_time_s: float | None = None
+    simulated_s: float = 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        """``report.json``."""
+        data = self.report.to_json()
+        if self.emulated:
+            data["emulation"] = {
+                "fell": bool(self.fall_reason),
+                "fall_reason": self.fall_reason,
+                "fall_time_s": self.fall_time_s,
+                "simulated_s": self.simulated_s,
+            }
+        return data
+
+
+def stdin_operator() -> queue.Queue[str]:
+    """Operator commands typed on stdin (one per line), read by a daemon thread."""
+    commands: queue.Queue[str] = queue.Queue()
+
+    def read() -> None:
+        for line in sys.stdin:
+            commands.put(line)
+
+    threading.Thread(target=read, name="bridge-operator", daemon=True).start()
+    return commands
+
+
+def run_bridge(
+    config: BridgeConfig,
+    endpoint: str,
+    *,
+    emulate: bool = False,
+    duration_s: float | None = None,
+    record: Path | None = None,
+    curve: CurveKeys | None = None,
+    operator: queue.Queue[str] | None = None,
+    timeout_s: float = 10.0,
+) -> BridgeRun:
+    """Run the bridge of ``config`` against the server at ``endpoint``.
+
+    Args:
+        config: The bridge file.
+        endpoint: ``poise serve`` endpoint.
+        emulate: Emulated actuators on a simulated robot instead of hardware.
+        duration_s: Overrides ``[bridge] duration_s`` (0: until stopped).
+        record: MCAP file of the conversation with the server.
+        curve: CURVE keys for a server that requires them.
+        operator: Operator commands (``estop``, ``rearm``, ``quit``).
+        timeout_s: Wait for the server's handshake.
+
+    Raises:
+        BridgeConfigError: The map does not match the server's joints, or a
+            motor model is unknown, or ``base_state = "simulator"`` without
+            emulation.
+        BridgeStartError: An actuator is silent, faulted or out of its limits.
+    """
+    settings = config.bridge
+    check_motors(config)
+    if settings.base_state == "simulator" and not emulate:
+        raise BridgeConfigError(
+            'base_state = "simulator" is the emulated robot\'s ground truth: run with '
+            '--emulate, or set base_state = "fixed" for a robot on a stand'
+        )
+    period_s = 1.0 / settings.rate_hz
+    with ExitStack() as stack:
+        client = stack.enter_context(
+            ControllerClient(endpoint, timeout_s=timeout_s, curve=curve, record=record)
+        )
+        welcome = client.connect(
+            **hello_model(settings.model),
+            controller=settings.controller,
+            params=settings.params,
+            client_name="poise bridge",
+            diagnostics_period_ticks=DIAGNOSTICS_PERIOD_TICKS,
+        )
+        check_against_welcome(config, welcome)
+        joint_map = JointMap(config, welcome)
+        model = pin.buildModelFromMJCF(str(resolve_model_path(settings.model)))
+        pacer: Pacer
+        base: BaseStateSource
+        overrides: dict[str, dict[str, Any]] = {}
+        emulation = None
+        if emulate:
+            from clients.bridge.emulation import Emulation
+
+            emulation = stack.enter_context(Emulation(config, welcome, joint_map))
+            overrides = emulation.bus_overrides
+            pacer = emulation.pacer(period_s)
+        else:
+            pacer = RealTimePacer(period_s)
+        if settings.base_state == "simulator" and emulation is not None:
+            base = SimulatorBase(emulation.plant, settings.support_force_threshold_N)
+        else:
+            base = FixedBase(welcome)
+        buses = open_buses(config, overrides)
+        for bus in buses.values():
+            stack.callback(bus.close)
+        bridge = Bridge(settings, joint_map, buses, client, base, pacer, model, operator)
+        duration = settings.duration_s if duration_s is None else duration_s
+        report = bridge.run(duration)
+        run = BridgeRun(report, emulated=emulation is not None)
+        if emulation is not None:
+            run.fall_reason = emulation.plant.fall_reason
+            run.fall_time_s = emulation.plant.fall_time_s
+            run.simulated_s = emulation.plant.time_s
+    return run
+
+
+def format_report(run: BridgeRun) -> str:
+    """The summary ``poise bridge`` prints: why it stopped, timing, then one line per joint."""
+    report = run.report
+    timing = report.timing
+    lines = [
+        f"stopped: {report.stopped or '?'}; safe state latched {len(report.latches)} time(s)"
+        + "".join(f"\n  - {reason}" for reason in report.latches),
+        f"loop: {timing.ticks} ticks, period {1e3 * timing.period_mean_s:.3f} ms "
+        f"± {1e3 * timing.jitter_s:.3f} (max {1e3 * timing.period_max_s:.3f}), "
+        f"work max {1e3 * timing.work_max_s:.3f} ms, {timing.overruns} overruns",
+        f"server: {report.commands} commands, {report.invalid_commands} refused, "
+        f"{report.server_timeouts} timeouts; {report.clamped_torques} torques clamped",
+    ]
+    if run.emulated:
+        robot = (
+            f"fell at {run.fall_time_s:.2f} s ({run.fall_reason})"
+            if run.fall_reason
+            else "stayed up"
+        )
+        lines.append(f"emulated robot: {robot} over {run.simulated_s:.2f} s simulated")
+    lines.append(
+        f"{'joint':<22} {'bus':<10} {'id':>4} {'replies':>8} {'missed':>7} "
+        f"{'faults':>6} {'T max °C':>8}"
+    )
+    for link in report.links:
+        lines.append(
+            f"{link.joint:<22} {link.bus:<10} {link.id:>4} {link.replies:>8} {link.missed:>7} "
+            f"{link.faults:>6} {link.temperature_max_C:>8.1f}"
+        )
+    return "\n".join(lines)
+
+
+def write_report(run: BridgeRun, path: Path) -> None:
+    """Write ``report.json``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(run.to_json(), indent=2, allow_nan=False, default=str))

@@ -1,0 +1,163 @@
+"""The actuator map: validation, the match with the server's joints, gearing and limits."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clients.bridge.config import (
+    BridgeConfig,
+    BridgeConfigError,
+    check_against_welcome,
+    load_bridge_config,
+)
+from clients.bridge.joint_map import JointMap
+from clients.bridge.safety import InvalidCommand, check_joints, clamp_torque
+from protocol.messages import JointInfo, Welcome
+
+EXAMPLE = Path(__file__).parents[3] / "examples" / "bridge" / "revolute_humanoid_mit.toml"
+
+
+def welcome(*names: str) -> Welcome:
+    return Welcome(
+        session_id="s",
+        model_name="robot",
+        model_hash="h",
+        total_mass=10.0,
+        standing_position_base_in_world=(0.0, 0.0, 1.0),
+        joints=[
+            JointInfo(
+                name=name,
+                kind="revolute",
+                nq=1,
+                nv=1,
+                torque_limit=[50.0],
+                position_lower=[-1.0],
+                position_upper=[1.0],
+            )
+            for name in names
+        ],
+        contacts=[],
+        controller="momentum",
+        params={},
+    )
+
+
+def config(**joints) -> BridgeConfig:
+    return BridgeConfig.model_validate({"buses": {"can0": {"protocol": "mit"}}, "joints": joints})
+
+
+def write(tmp_path, text: str) -> Path:
+    path = tmp_path / "map.toml"
+    path.write_text(text)
+    return path
+
+
+def test_the_example_map_loads():
+    loaded = load_bridge_config(EXAMPLE)
+    assert len(loaded.joints) == 22 and set(loaded.buses) == {"left_leg", "right_leg", "upper_body"}
+
+
+def test_a_typo_gets_the_closest_key_of_its_own_table(tmp_path):
+    path = write(
+        tmp_path,
+        '[buses.a]\nprotocol = "mit"\n[joints.knee]\nbus = "a"\nid = 1\ngear_ration = 2\n',
+    )
+    with pytest.raises(
+        BridgeConfigError, match="joints.knee.gear_ration.*did you mean 'gear_ratio'"
+    ):
+        load_bridge_config(path)
+
+
+def test_a_joint_on_a_missing_bus_and_a_shared_id_are_refused():
+    with pytest.raises(ValueError, match="no such bus; buses: can0"):
+        config(knee={"bus": "can1", "id": 1})
+    with pytest.raises(ValueError, match="share id 1 on bus 'can0'"):
+        config(knee={"bus": "can0", "id": 1}, hip={"bus": "can0", "id": 1})
+
+
+def test_a_damiao_actuator_needs_its_master_id():
+    with pytest.raises(ValueError, match="needs master_id"):
+        BridgeConfig.model_validate(
+            {"buses": {"a": {"protocol": "damiao"}}, "joints": {"knee": {"bus": "a", "id": 1}}}
+        )
+
+
+def test_the_host_watchdog_must_act_before_the_actuators_own():
+    with pytest.raises(ValueError, match="must exceed watchdog_s"):
+        BridgeConfig.model_validate(
+            {
+                "bridge": {"watchdog_s": 0.2, "actuator_watchdog_s": 0.1},
+                "buses": {},
+                "joints": {},
+            }
+        )
+
+
+def test_a_map_that_does_not_match_the_servers_joints_names_them():
+    mapped = config(hip={"bus": "can0", "id": 1}, knee_typo={"bus": "can0", "id": 2})
+    with pytest.raises(BridgeConfigError) as error:
+        check_against_welcome(mapped, welcome("hip", "knee", "ankle"))
+    message = str(error.value)
+    assert "no actuator for knee, ankle" in message
+    assert "has no joint knee_typo" in message
+    check_against_welcome(config(a={"bus": "can0", "id": 1}), welcome("a"))
+
+
+def test_gearing_round_trips_and_conserves_power():
+    mapped = config(
+        a={"bus": "can0", "id": 1, "gear_ratio": 9.0, "direction": -1, "zero_offset_rad": 0.3},
+        b={"bus": "can0", "id": 2},
+    )
+    joint_map = JointMap(mapped, welcome("a", "b"))
+    rng = np.random.default_rng(0)
+    q, v, tau = rng.normal(size=(3, 2))
+    np.testing.assert_allclose(joint_map.joint_position_rad(joint_map.motor_position_rad(q)), q)
+    motor_v = joint_map.motor_velocity_rad_s(v)
+    motor_tau = joint_map.motor_torque_Nm(tau)
+    np.testing.assert_allclose(motor_v * motor_tau, v * tau)  # lossless gear
+    assert motor_v[0] == pytest.approx(-9.0 * v[0])
+    assert joint_map.motor_position_rad(np.array([0.3, 0.0]))[0] == pytest.approx(0.0)
+    assert joint_map.motor_damping(2.0)["can0"] == {1: pytest.approx(2.0 / 81), 2: 2.0}
+
+
+def test_limits_default_to_the_models_and_derate_with_temperature():
+    mapped = config(
+        a={
+            "bus": "can0",
+            "id": 1,
+            "torque_limit_Nm": 20.0,
+            "derate_above_C": 60,
+            "temperature_limit_C": 80,
+        },
+        b={"bus": "can0", "id": 2, "position_limit_rad": [-0.5, 0.5]},
+    )
+    joint_map = JointMap(mapped, welcome("a", "b"))
+    np.testing.assert_array_equal(joint_map.torque_limit_Nm, [20.0, 50.0])
+    np.testing.assert_array_equal(joint_map.position_upper_rad, [1.0, 0.5])
+    derated = joint_map.derated_torque_limit_Nm(np.array([70.0, np.nan]))
+    np.testing.assert_allclose(derated, [10.0, 50.0])
+    assert joint_map.derated_torque_limit_Nm(np.array([85.0, 20.0]))[0] == 0.0
+
+
+def test_torques_are_clamped_and_counted_and_non_finite_ones_refused():
+    limit = np.array([10.0, 5.0])
+    torque, clamped = clamp_torque([12.0, -3.0], limit, ["a", "b"])
+    np.testing.assert_array_equal(torque, [10.0, -3.0])
+    assert clamped == ["a"]
+    with pytest.raises(InvalidCommand, match="not finite at b=nan"):
+        clamp_torque([1.0, float("nan")], limit, ["a", "b"])
+    with pytest.raises(InvalidCommand, match="3 entries, the robot 2 joints"):
+        clamp_torque([1.0, 2.0, 3.0], limit, ["a", "b"])
+
+
+def test_joint_checks_name_the_joint_and_the_value():
+    joint_map = JointMap(
+        config(a={"bus": "can0", "id": 1}, b={"bus": "can0", "id": 2}), welcome("a", "b")
+    )
+    zeros, cool = np.zeros(2), np.array([30.0, np.nan])
+    assert check_joints(joint_map, zeros, zeros, cool) == ""
+    assert "b at 1.020 rad is outside" in check_joints(joint_map, np.array([0, 1.02]), zeros, cool)
+    assert check_joints(joint_map, np.array([0, 1.02]), zeros, cool, margin_rad=0.05) == ""
+    assert "a at 25.00 rad/s" in check_joints(joint_map, zeros, np.array([25.0, 0]), cool)
+    assert "a's motor at 95 °C" in check_joints(joint_map, zeros, zeros, np.array([95.0, 20]))
