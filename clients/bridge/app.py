@@ -13,15 +13,16 @@ import logging
 import queue
 import sys
 import threading
-from contextlib import ExitStack
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pinocchio as pin
 
 from clients.bridge.base_state import BaseStateSource, FixedBase, SimulatorBase
-from clients.bridge.buses import check_motors, open_buses
+from clients.bridge.buses import check_motors, motor_peak_torque_Nm, open_buses
 from clients.bridge.config import BridgeConfig, BridgeConfigError, check_against_welcome
 from clients.bridge.joint_map import JointMap
 from clients.bridge.loop import Bridge, BridgeReport, Pacer
@@ -29,7 +30,18 @@ from clients.bridge.plant import RealTimePacer
 from clients.client import ControllerClient, CurveKeys
 from clients.sim.model_file import hello_model, resolve_model_path
 
-__all__ = ["BridgeRun", "format_report", "run_bridge", "stdin_operator"]
+if TYPE_CHECKING:
+    from clients.bridge.emulation import Emulation
+
+__all__ = [
+    "BridgeRun",
+    "BridgeSession",
+    "format_report",
+    "open_bridge",
+    "run_bridge",
+    "stdin_operator",
+    "write_report",
+]
 
 log = logging.getLogger("poise.bridge")
 
@@ -72,24 +84,31 @@ def stdin_operator() -> queue.Queue[str]:
     return commands
 
 
-def run_bridge(
+@dataclass
+class BridgeSession:
+    """A bridge ready to run: its loop and, with emulation, the emulated robot."""
+
+    bridge: Bridge
+    emulation: Emulation | None = None
+
+
+@contextmanager
+def open_bridge(
     config: BridgeConfig,
     endpoint: str,
     *,
     emulate: bool = False,
-    duration_s: float | None = None,
     record: Path | None = None,
     curve: CurveKeys | None = None,
     operator: queue.Queue[str] | None = None,
     timeout_s: float = 10.0,
-) -> BridgeRun:
-    """Run the bridge of ``config`` against the server at ``endpoint``.
+) -> Iterator[BridgeSession]:
+    """Connect, check the map against the server, open the buses (or emulate them).
 
     Args:
         config: The bridge file.
         endpoint: ``poise serve`` endpoint.
         emulate: Emulated actuators on a simulated robot instead of hardware.
-        duration_s: Overrides ``[bridge] duration_s`` (0: until stopped).
         record: MCAP file of the conversation with the server.
         curve: CURVE keys for a server that requires them.
         operator: Operator commands (``estop``, ``rearm``, ``quit``).
@@ -99,7 +118,7 @@ def run_bridge(
         BridgeConfigError: The map does not match the server's joints, or a
             motor model is unknown, or ``base_state = "simulator"`` without
             emulation.
-        BridgeStartError: An actuator is silent, faulted or out of its limits.
+        BusError: A bus cannot be opened.
     """
     settings = config.bridge
     check_motors(config)
@@ -121,10 +140,17 @@ def run_bridge(
             diagnostics_period_ticks=DIAGNOSTICS_PERIOD_TICKS,
         )
         check_against_welcome(config, welcome)
-        joint_map = JointMap(config, welcome)
+        joint_map = JointMap(
+            config,
+            welcome,
+            {
+                joint: motor_peak_torque_Nm(config.buses[actuator.bus].protocol, actuator)
+                for joint, actuator in config.joints.items()
+            },
+        )
         model = pin.buildModelFromMJCF(str(resolve_model_path(settings.model)))
-        pacer: Pacer
-        base: BaseStateSource
+        pacer: Pacer = RealTimePacer(period_s)
+        base: BaseStateSource = FixedBase(welcome)
         overrides: dict[str, dict[str, Any]] = {}
         emulation = None
         if emulate:
@@ -133,23 +159,42 @@ def run_bridge(
             emulation = stack.enter_context(Emulation(config, welcome, joint_map))
             overrides = emulation.bus_overrides
             pacer = emulation.pacer(period_s)
-        else:
-            pacer = RealTimePacer(period_s)
-        if settings.base_state == "simulator" and emulation is not None:
-            base = SimulatorBase(emulation.plant, settings.support_force_threshold_N)
-        else:
-            base = FixedBase(welcome)
+            if settings.base_state == "simulator":
+                base = SimulatorBase(emulation.plant, settings.support_force_threshold_N)
         buses = open_buses(config, overrides)
         for bus in buses.values():
             stack.callback(bus.close)
-        bridge = Bridge(settings, joint_map, buses, client, base, pacer, model, operator)
-        duration = settings.duration_s if duration_s is None else duration_s
-        report = bridge.run(duration)
-        run = BridgeRun(report, emulated=emulation is not None)
-        if emulation is not None:
-            run.fall_reason = emulation.plant.fall_reason
-            run.fall_time_s = emulation.plant.fall_time_s
-            run.simulated_s = emulation.plant.time_s
+        bridge = Bridge(settings, joint_map, buses, client, base, pacer, model, operator, timeout_s)
+        yield BridgeSession(bridge, emulation)
+
+
+def run_bridge(
+    config: BridgeConfig,
+    endpoint: str,
+    *,
+    duration_s: float | None = None,
+    **options: Any,
+) -> BridgeRun:
+    """Run the bridge of ``config`` against the server at ``endpoint`` and report.
+
+    Args:
+        config: The bridge file.
+        endpoint: ``poise serve`` endpoint.
+        duration_s: Overrides ``[bridge] duration_s`` (0: until stopped).
+        **options: As for :func:`open_bridge`.
+
+    Raises:
+        BridgeConfigError: See :func:`open_bridge`.
+        BusError: A bus cannot be opened.
+        BridgeStartError: An actuator is silent, faulted or out of its limits.
+    """
+    with open_bridge(config, endpoint, **options) as session:
+        duration = config.bridge.duration_s if duration_s is None else duration_s
+        run = BridgeRun(session.bridge.run(duration), emulated=session.emulation is not None)
+        if session.emulation is not None:
+            plant = session.emulation.plant
+            run.fall_reason, run.fall_time_s = plant.fall_reason, plant.fall_time_s
+            run.simulated_s = plant.time_s
     return run
 
 

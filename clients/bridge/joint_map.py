@@ -36,9 +36,16 @@ class JointMap:
         config: The bridge file (validated).
         welcome: The server's handshake; its joint order is the wire order,
             and its limits fill the limits the map leaves out.
+        motor_peak_torque_Nm: Per joint, the most its motor can make (motor
+            side); the joint's torque limit is at most that through the gear.
     """
 
-    def __init__(self, config: BridgeConfig, welcome: Welcome):
+    def __init__(
+        self,
+        config: BridgeConfig,
+        welcome: Welcome,
+        motor_peak_torque_Nm: Mapping[str, float] | None = None,
+    ):
         joints = list(welcome.joints)
         self.names = [joint.name for joint in joints]
         entries = [config.joints[name] for name in self.names]
@@ -70,6 +77,9 @@ class JointMap:
                 for e, joint in zip(entries, joints, strict=True)
             ]
         )
+        if motor_peak_torque_Nm is not None:
+            peak = np.array([motor_peak_torque_Nm.get(name, np.inf) for name in self.names])
+            self.torque_limit_Nm = np.minimum(self.torque_limit_Nm, peak * self.gear_ratio)
         self.velocity_limit_rad_s = np.array([e.velocity_limit_rad_s for e in entries])
         self.derate_above_C = np.array([e.derate_above_C for e in entries])
         self.temperature_limit_C = np.array([e.temperature_limit_C for e in entries])

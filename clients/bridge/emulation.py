@@ -1,0 +1,147 @@
+"""``poise bridge --emulate``: every bus of a map served by emulated actuators on a simulated robot.
+
+Each CAN bus becomes a python-can ``virtual`` channel with the map's
+actuators emulated on it (:class:`~clients.bridge.emulators.motor.CanDeviceHost`),
+each Dynamixel bus a pseudo-terminal with emulated servos; every emulated
+motor drives its joint of the simulated robot (:class:`~clients.bridge.plant.Plant`).
+The bridge opens the buses with :attr:`Emulation.bus_overrides` and is
+paced by the plant, so the run is reproducible whatever the machine's load.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from contextlib import ExitStack
+from typing import Any
+
+import can
+
+from clients.bridge.buses import motor_peak_torque_Nm
+from clients.bridge.config import BridgeConfig
+from clients.bridge.emulators.damiao import EmulatedDamiao
+from clients.bridge.emulators.dynamixel import DynamixelEmulator
+from clients.bridge.emulators.mit import EmulatedMitActuator
+from clients.bridge.emulators.motor import CanDevice, CanDeviceHost, EmulatedMotor
+from clients.bridge.emulators.odrive import EmulatedODrive
+from clients.bridge.joint_map import JointMap
+from clients.bridge.plant import Plant, PlantPacer
+from clients.bridge.protocols.damiao import DAMIAO_MOTOR_MODELS
+from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
+from clients.sim.backend import PhysicsBackend
+from clients.sim.runner import standing_state
+from protocol.messages import Welcome
+
+__all__ = ["Emulation"]
+
+_CHANNELS = itertools.count()
+
+ODRIVE_PEAK_TORQUE_NM = 60.0
+"""Torque an emulated ODrive's motor makes at most when the map gives no joint limit."""
+
+
+class Emulation:
+    """The emulated actuators and the simulated robot of one bridge run.
+
+    A context manager: entering starts the emulators' threads, leaving stops
+    them and closes their channels and pseudo-terminals.
+
+    Attributes:
+        plant: The simulated robot.
+        motors: Each joint's emulated motor, by joint name.
+        devices: Each joint's protocol emulator, by joint name (fault
+            injection in tests: ``motor.silent``, ``motor.fault_code``, …).
+        bus_overrides: What :func:`~clients.bridge.buses.open_buses` needs to
+            reach the emulators instead of the map's interfaces.
+    """
+
+    def __init__(self, config: BridgeConfig, welcome: Welcome, joint_map: JointMap):
+        self._stack = ExitStack()
+        self.motors: dict[str, EmulatedMotor] = {}
+        self.devices: dict[str, Any] = {}
+        self.bus_overrides: dict[str, dict[str, Any]] = {}
+        for name in joint_map.names:
+            actuator = config.joints[name]
+            protocol = config.buses[actuator.bus].protocol
+            peak = motor_peak_torque_Nm(protocol, actuator)
+            if peak == float("inf"):
+                limit = joint_map.torque_limit_Nm[joint_map.names.index(name)]
+                peak = min(ODRIVE_PEAK_TORQUE_NM, limit / actuator.gear_ratio)
+            self.motors[name] = EmulatedMotor(torque_limit_Nm=peak)
+        self._servers: list[Any] = []
+        for bus_name, spec in config.buses.items():
+            joints = config.joints_on(bus_name)
+            if spec.protocol == "dynamixel":
+                emulator = DynamixelEmulator(
+                    {a.id: a.motor for a in joints.values()},
+                    {a.id: self.motors[joint] for joint, a in joints.items()},
+                )
+                for joint, a in joints.items():
+                    self.devices[joint] = emulator.servos[a.id]
+                self._servers.append(emulator)
+                self.bus_overrides[bus_name] = {"port": emulator.port}
+                continue
+            channel = f"poise-emulated-{os.getpid()}-{next(_CHANNELS)}-{bus_name}"
+            devices: list[CanDevice] = []
+            for joint, a in joints.items():
+                device = self._can_device(spec.protocol, a.id, a.motor, a.master_id, joint)
+                self.devices[joint] = device
+                devices.append(device)
+            host_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+            self._servers.append(CanDeviceHost(host_bus, devices))
+            self._stack.callback(host_bus.shutdown)
+            self.bus_overrides[bus_name] = {"interface": "virtual", "channel": channel}
+        backend = _backend(config)
+        backend.reset(standing_state(welcome, {}))
+        self.plant = Plant(
+            backend,
+            joint_map,
+            [self.motors[name] for name in joint_map.names],
+            [push.to_push() for push in config.emulation.pushes],
+            welcome.standing_position_base_in_world[2],
+        )
+
+    def _can_device(
+        self, protocol: str, actuator_id: int, motor: str, master_id: int | None, joint: str
+    ) -> CanDevice:
+        if protocol == "mit":
+            return EmulatedMitActuator(actuator_id, self.motors[joint], MIT_MOTOR_MODELS[motor])
+        if protocol == "damiao":
+            return EmulatedDamiao(
+                actuator_id,
+                self.motors[joint],
+                DAMIAO_MOTOR_MODELS[motor],
+                master_id=master_id or 0,
+            )
+        return EmulatedODrive(actuator_id, self.motors[joint])
+
+    def pacer(self, period_s: float) -> PlantPacer:
+        """Paces the bridge by the plant."""
+        return PlantPacer(self.plant, period_s)
+
+    def __enter__(self) -> Emulation:
+        # Servers stop before their channels close (the stack unwinds in reverse).
+        for server in self._servers:
+            self._stack.enter_context(server)
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self._stack.close()
+
+
+def _backend(config: BridgeConfig) -> PhysicsBackend:
+    """The emulation's physics at its rate and friction."""
+    emulation = config.emulation
+    timestep_s = 1.0 / emulation.physics_rate_hz
+    model = config.bridge.model
+    if emulation.backend == "mujoco":
+        from clients.sim.mujoco_backend import MujocoBackend
+
+        return MujocoBackend(
+            model, friction_coefficient=emulation.friction_coefficient, timestep_s=timestep_s
+        )
+    from clients.sim.reference import ReferenceBackend
+
+    return ReferenceBackend(
+        model, friction_coefficient=emulation.friction_coefficient, timestep_s=timestep_s
+    )
