@@ -64,7 +64,7 @@ def test_a_typo_gets_the_closest_key_of_its_own_table(tmp_path):
         '[buses.a]\nprotocol = "mit"\n[joints.knee]\nbus = "a"\nid = 1\ngear_ration = 2\n',
     )
     with pytest.raises(
-        BridgeConfigError, match="joints.knee.gear_ration.*did you mean 'gear_ratio'"
+        BridgeConfigError, match=r"joints.knee.gear_ration.*did you mean 'gear_ratio'"
     ):
         load_bridge_config(path)
 

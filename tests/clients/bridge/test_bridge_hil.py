@@ -1,0 +1,92 @@
+"""Hardware in the loop: a whole robot driven through the bridge on emulated actuators.
+
+The revolute_humanoid balances 10 s and takes a 100 N × 0.1 s chest push
+with every joint on an emulated actuator (MIT-mode: 12-bit torques), and
+again with its legs on Damiao and its upper body on Dynamixel servos. A
+server killed mid-run puts every actuator in its safe state within the
+watchdog time, and the bridge does not resume on its own.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clients.bridge.app import open_bridge, run_bridge
+from clients.bridge.config import load_bridge_config
+from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
+from clients.server_process import ServerProcess
+
+pytestmark = pytest.mark.e2e
+
+EXAMPLES = Path(__file__).parents[3] / "examples" / "bridge"
+
+
+@pytest.mark.parametrize("map_file", ["revolute_humanoid_mit.toml", "revolute_humanoid_mixed.toml"])
+def test_the_revolute_humanoid_balances_and_takes_a_chest_push_through_the_bridge(server, map_file):
+    config = load_bridge_config(EXAMPLES / map_file)
+    push = config.emulation.pushes[0]
+    assert push.body == "torso" and push.force_in_world_N == (100.0, 0.0, 0.0)
+    assert push.duration_s == 0.1 and config.bridge.duration_s == 10.0
+    run = run_bridge(config, server.endpoint, emulate=True)
+    report = run.report
+    print(f"{map_file}: {report.timing.ticks} ticks, {report.commands} commands")
+    assert run.fall_reason == "", run.fall_reason
+    assert run.simulated_s == pytest.approx(10.0, abs=0.01)
+    assert report.stopped == "duration" and report.latches == []
+    assert report.commands == report.timing.ticks + 1
+    assert report.invalid_commands == 0 and report.server_timeouts == 0
+    assert all(link.missed == 0 and link.faults == 0 for link in report.links)
+
+
+def test_mit_torques_reach_the_motors_quantized_to_12_bits(server):
+    config = load_bridge_config(EXAMPLES / "revolute_humanoid_mit.toml")
+    with open_bridge(config, server.endpoint, emulate=True) as session:
+        bridge = session.bridge
+        bridge.start()
+        for _ in range(100):
+            bridge.tick()
+            bridge.pacer.wait()
+        for joint, motor in session.emulation.motors.items():
+            ranges = MIT_MOTOR_MODELS[config.joints[joint].motor]
+            step = 2 * ranges.torque_max_Nm / 4095
+            torques = np.array([r.command.torque_Nm for r in motor.received[-50:]])
+            codes = (torques + ranges.torque_max_Nm) / step
+            np.testing.assert_allclose(codes, np.round(codes), atol=1e-6, err_msg=joint)
+        bridge.shutdown()
+
+
+def test_a_killed_server_puts_every_actuator_in_its_safe_state_within_the_watchdog_time():
+    config = load_bridge_config(EXAMPLES / "revolute_humanoid_mit.toml")
+    watchdog_s = config.bridge.watchdog_s
+    with ServerProcess() as server:
+        with open_bridge(config, server.endpoint, emulate=True) as session:
+            bridge = session.bridge
+            runner = threading.Thread(target=bridge.run, kwargs={"duration_s": 3.0})
+            runner.start()
+            while bridge.report.commands < 200:  # balancing
+                time.sleep(0.01)
+            server.process.kill()
+            runner.join(timeout=60)
+            assert not runner.is_alive()
+    report = bridge.report
+    assert report.latches and "no valid command from the server" in report.latches[0]
+    assert report.stopped == "duration"  # it held the safe state to the end: no resuming
+    delays = []
+    for joint, motor in session.emulation.motors.items():
+        kinds = [record.kind for record in motor.received]
+        first_safe = kinds.index("safe")
+        last_command = motor.received[first_safe - 1]
+        assert last_command.kind == "command", joint
+        delays.append(motor.received[first_safe].time_s - last_command.time_s)
+        later = set(kinds[first_safe:])
+        assert later <= {"safe", "disable"}, (joint, later)  # nothing but safe afterwards
+    print(
+        f"last command → safe state: {1e3 * max(delays):.1f} ms at most, watchdog "
+        f"{1e3 * watchdog_s:.0f} ms"
+    )
+    assert max(delays) <= watchdog_s
