@@ -40,6 +40,7 @@ import can
 from clients.bridge.actuator import MotorCommand
 from clients.bridge.emulators.motor import CanDevice, EmulatedMotor
 from clients.bridge.protocols.odrive import (
+    DEFAULT_WATCHDOG_ENDPOINTS,
     AxisState,
     Command,
     ControlMode,
@@ -97,7 +98,7 @@ class EmulatedODrive(CanDevice):
         motor: EmulatedMotor,
         *,
         firmware: Firmware = Firmware.V0_6,
-        watchdog_endpoints: WatchdogEndpoints = WatchdogEndpoints(),
+        watchdog_endpoints: WatchdogEndpoints = DEFAULT_WATCHDOG_ENDPOINTS,
         heartbeat_period_s: float = 0.1,
         clock: Callable[[], float] = time.monotonic,
     ):

@@ -46,6 +46,7 @@ from clients.bridge.actuator import BusError, MotorCommand, MotorFeedback
 from protocol.errors import PoiseError
 
 __all__ = [
+    "DEFAULT_WATCHDOG_ENDPOINTS",
     "NODE_ID_MAX",
     "AxisError",
     "AxisError05",
@@ -271,6 +272,10 @@ class WatchdogEndpoints:
 
     watchdog_timeout: int = 200
     enable_watchdog: int = 201
+
+
+DEFAULT_WATCHDOG_ENDPOINTS = WatchdogEndpoints()
+"""The default endpoint ids (see :class:`WatchdogEndpoints`)."""
 
 
 # ---------------------------------------------------------------- errors
@@ -712,7 +717,7 @@ class ODriveBus:
         reply_timeout_s: float = 0.002,
         torque_limit_Nm: Mapping[int, float] | float | None = None,
         firmware: Firmware = Firmware.V0_6,
-        watchdog_endpoints: WatchdogEndpoints = WatchdogEndpoints(),
+        watchdog_endpoints: WatchdogEndpoints = DEFAULT_WATCHDOG_ENDPOINTS,
         request_torques: bool = True,
         temperature_period: int = 10,
     ):
