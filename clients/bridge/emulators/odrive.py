@@ -18,9 +18,9 @@ It decodes frames with the parse functions of
   bits and disarms the axis too.
 * RTR (or empty data) frames for Heartbeat, Get_Encoder_Estimates,
   Get_Torques, Get_Temperature and Get_Iq are answered with float32 data.
-  A heartbeat also goes out whenever the axis state or error changes and,
-  standing in for the cyclic one, with the first reply after
-  ``heartbeat_period_s``.
+  A heartbeat also goes out after each Set_Axis_State (granted or refused),
+  whenever the axis state or error changes and, standing in for the cyclic
+  one, with the first reply after ``heartbeat_period_s``.
 * ``motor.silent``: it neither hears nor answers.
 
 The emulator is stricter than the firmware on one point: 0.5.x feeds the
@@ -244,6 +244,7 @@ class EmulatedODrive(CanDevice):
                 self._apply_torque()
             elif command == Command.SET_AXIS_STATE:
                 self._request_state(parse_set_axis_state(data))
+                self._reported = None  # report the outcome, refused or not
             elif command == Command.SET_CONTROLLER_MODE:
                 self.control_mode, self.input_mode = parse_set_controller_mode(data)
             elif command == Command.ESTOP:

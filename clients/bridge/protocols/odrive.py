@@ -703,6 +703,10 @@ class ODriveBus:
             estimate; otherwise the feedback torque is the command.
         temperature_period: Ask Get_Temperature every this many exchanges
             (0: never); the newest answer is reported in between.
+        arm_timeout_s: After :meth:`enable`, how long an axis may report a
+            state other than CLOSED_LOOP_CONTROL without an error (still
+            arming, or a heartbeat sent before the request) before that is a
+            fault; once seen in closed loop, leaving it is a fault at once.
 
     Raises:
         InvalidCommand: Bad node ids, timeout or torque limits.
@@ -720,6 +724,7 @@ class ODriveBus:
         watchdog_endpoints: WatchdogEndpoints = DEFAULT_WATCHDOG_ENDPOINTS,
         request_torques: bool = True,
         temperature_period: int = 10,
+        arm_timeout_s: float = 0.5,
     ):
         ids = tuple(node_ids)
         for node_id in ids:
@@ -737,6 +742,7 @@ class ODriveBus:
         self.watchdog_endpoints = watchdog_endpoints
         self.request_torques = request_torques and firmware is Firmware.V0_6
         self.temperature_period = temperature_period if firmware is Firmware.V0_6 else 0
+        self.arm_timeout_s = arm_timeout_s
         self.torque_limit_Nm = self._limits(torque_limit_Nm)
         self.malformed_frames = 0
         """Frames from our nodes that did not decode (counted, never raised)."""
@@ -748,6 +754,7 @@ class ODriveBus:
         self._temperature: dict[int, Temperature] = {}
         self._closed_loop_expected: dict[int, bool] = dict.fromkeys(ids, False)
         self._enabled_s: dict[int, float] = dict.fromkeys(ids, 0.0)
+        self._armed_seen: dict[int, bool] = dict.fromkeys(ids, False)
         self._commanded_Nm: dict[int, float] = dict.fromkeys(ids, 0.0)
 
     def _limits(self, limit: Mapping[int, float] | float | None) -> dict[int, float | None]:
@@ -828,6 +835,7 @@ class ODriveBus:
         for node in self.actuator_ids:
             self._closed_loop_expected[node] = True
             self._enabled_s[node] = now
+            self._armed_seen[node] = False
 
     def disable(self) -> None:
         """Set every axis IDLE (motor free)."""
@@ -950,8 +958,11 @@ class ODriveBus:
         data = bytes(message.data)
         try:
             if command == Command.HEARTBEAT:
-                self._heartbeat[node] = parse_heartbeat(data, firmware=self.firmware)
+                heartbeat = parse_heartbeat(data, firmware=self.firmware)
+                self._heartbeat[node] = heartbeat
                 self._heartbeat_s[node] = time.monotonic()
+                if heartbeat.axis_state == AxisState.CLOSED_LOOP_CONTROL:
+                    self._armed_seen[node] = True
                 return node
             if command == Command.GET_TEMPERATURE and self.firmware is Firmware.V0_6:
                 self._temperature[node] = parse_temperature(data)
@@ -982,6 +993,11 @@ class ODriveBus:
                 self._closed_loop_expected[node]
                 and self._heartbeat_s[node] > self._enabled_s[node]
                 and heartbeat.axis_state != AxisState.CLOSED_LOOP_CONTROL
+                and (
+                    heartbeat.axis_error
+                    or self._armed_seen[node]
+                    or time.monotonic() - self._enabled_s[node] > self.arm_timeout_s
+                )
             ):
                 parts.append(f"axis {_state_name(heartbeat.axis_state)}")
         if fault_code:
