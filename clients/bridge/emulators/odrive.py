@@ -121,8 +121,12 @@ class EmulatedODrive(CanDevice):
     # ------------------------------------------------------------ state
 
     @property
-    def _errors(self) -> type:
-        return self.firmware.axis_error
+    def _watchdog_bit(self) -> int:
+        return self.firmware.axis_error.WATCHDOG_TIMER_EXPIRED
+
+    @property
+    def _estop_bit(self) -> int:
+        return self.firmware.axis_error.ESTOP_REQUESTED
 
     def reported_error(self) -> int:
         """The axis error it reports: latched errors and the motor's injected fault."""
@@ -140,7 +144,7 @@ class EmulatedODrive(CanDevice):
         # The motor's watchdog disables it (possibly inside a torque_Nm() call of
         # the plant, so expired() may already have fired): armed but not enabled.
         if self.motor.watchdog_expired() or not self.motor.enabled:
-            self.axis_error |= self._errors.WATCHDOG_TIMER_EXPIRED
+            self.axis_error |= self._watchdog_bit
             self.axis_state = AxisState.IDLE
         if self.motor.fault_code:
             self._disarm()
@@ -248,7 +252,7 @@ class EmulatedODrive(CanDevice):
             elif command == Command.SET_CONTROLLER_MODE:
                 self.control_mode, self.input_mode = parse_set_controller_mode(data)
             elif command == Command.ESTOP:
-                self.axis_error |= self._errors.ESTOP_REQUESTED
+                self.axis_error |= self._estop_bit
                 self._disarm()
             elif command == Command.CLEAR_ERRORS:
                 self.axis_error = 0

@@ -803,7 +803,7 @@ class ODriveBus:
             )
         for frame in frames:
             node_id, _ = split_arbitration_id(frame.arbitration_id)
-            self._commanded_Nm[node_id] = parse_set_input_torque(frame.data)
+            self._commanded_Nm[node_id] = parse_set_input_torque(bytes(frame.data))
         return self._poll(list(commands), frames)
 
     def hold_safe(

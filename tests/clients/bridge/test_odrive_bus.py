@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import can
 import pytest
 
-from clients.bridge.actuator import ZERO_COMMAND, BusError, MotorCommand
+from clients.bridge.actuator import ZERO_COMMAND, ActuatorBus, BusError, MotorCommand
 from clients.bridge.emulators.motor import CanDevice, CanDeviceHost, EmulatedMotor
 from clients.bridge.emulators.odrive import EmulatedODrive
 from clients.bridge.protocols.odrive import (
@@ -70,6 +70,17 @@ def open_rig(
 @pytest.fixture
 def rig() -> Iterator[Rig]:
     yield from open_rig()
+
+
+def _is_an_actuator_bus(bus: ODriveBus) -> ActuatorBus:
+    return bus  # mypy checks ODriveBus against the protocol
+
+
+def test_implements_the_actuator_bus_verbs(rig):
+    for verb in ActuatorBus.__dict__:
+        if not verb.startswith("_") and callable(getattr(ActuatorBus, verb)):
+            assert callable(getattr(rig.bus, verb)), verb
+    assert rig.bus.name == "test" and rig.bus.actuator_ids == (1, 2)
 
 
 def zero(bus: ODriveBus) -> dict:
