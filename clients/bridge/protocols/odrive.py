@@ -437,7 +437,8 @@ def make_rx_sdo_write(
     """RxSdo (0x04) write: uint8 opcode 1, uint16 endpoint id, uint8 reserved, value.
 
     The value is packed little-endian at its natural size (``bool`` one byte,
-    ``float`` four), as ODrive's ``can_restore_config.py`` example does.
+    ``float`` four), as ``struct.pack('<BHB' + fmt, ...)`` in the flat_endpoints
+    scripts does (e.g. github.com/Trana/ros_odrive, ``odrive_config_setter/set_config.py``).
 
     Raises:
         InvalidCommand: Unknown ``value_type`` (one of ``bool``, ``uint8``,
