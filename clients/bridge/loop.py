@@ -233,6 +233,7 @@ class Bridge:
         self._commands = self._zero_commands()
         self._held: Command | None = None
         self._enabled = False
+        self._failed_buses: set[str] = set()
 
     def _zero_commands(self) -> dict[str, dict[int, MotorCommand]]:
         return {
@@ -465,7 +466,15 @@ class Bridge:
         return replies
 
     def _hold_safe(self) -> None:
-        feedback = {name: bus.hold_safe(self._damping[name]) for name, bus in self.buses.items()}
+        """Command the safe state on every bus; a failing bus does not stop the others."""
+        feedback: dict[str, dict[int, MotorFeedback | None]] = {}
+        for name, bus in self.buses.items():
+            try:
+                feedback[name] = bus.hold_safe(self._damping[name])
+            except BusError as exc:
+                if name not in self._failed_buses:
+                    log.error("cannot command the safe state on bus %r: %s", name, exc.detail)
+                    self._failed_buses.add(name)
         replies = self.joint_map.gather(feedback)
         for link, reply in zip(self.report.links, replies, strict=True):
             link.add(reply)
