@@ -112,6 +112,9 @@ class DamiaoStatus(IntEnum):
         return self not in (DamiaoStatus.DISABLED, DamiaoStatus.ENABLED)
 
 
+_STATUSES = {int(status): status for status in DamiaoStatus}
+
+
 class DamiaoSpecial(IntEnum):
     """Last byte of the special frames ``FF FF FF FF FF FF FF xx`` Damiao motors take."""
 
@@ -297,13 +300,13 @@ def parse_feedback(data: bytes, ranges: MitRanges) -> DamiaoFeedback:
     p = (data[1] << 8) | data[2]
     v = (data[3] << 4) | (data[4] >> 4)
     t = ((data[4] & 0xF) << 8) | data[5]
-    try:
-        known = DamiaoStatus(status)
-        fault_code = int(known) if known.is_fault else 0
-        fault = known.description if known.is_fault else ""
-    except ValueError:
-        fault_code = status
-        fault = f"unknown fault code {status:#x}"
+    known = _STATUSES.get(status)
+    if known is None:
+        fault_code, fault = status, f"unknown fault code {status:#x}"
+    elif known.is_fault:
+        fault_code, fault = int(known), known.description
+    else:
+        fault_code, fault = 0, ""
     r = ranges
     mos_C, rotor_C = float(data[6]), float(data[7])
     return DamiaoFeedback(

@@ -196,6 +196,9 @@ class CubeMarsFault(IntEnum):
     MOTOR_STALL = 7, "motor stall"
 
 
+_CUBEMARS_FAULTS = {int(fault): fault for fault in CubeMarsFault}
+
+
 def quantum(x_min: float, x_max: float, bits: int) -> float:
     """One step of the wire's integer, in the field's unit: ``span / (2^bits − 1)``."""
     return (x_max - x_min) / ((1 << bits) - 1)
@@ -435,10 +438,8 @@ def parse_reply(data: bytes, ranges: MitRanges) -> MitReply:
     if len(data) == 8:
         temperature_C = float(data[6] - 256 if data[6] > 127 else data[6])
         fault_code = data[7]
-        try:
-            fault = CubeMarsFault(fault_code).description
-        except ValueError:
-            fault = f"unknown fault code {fault_code}"
+        known = _CUBEMARS_FAULTS.get(fault_code)
+        fault = known.description if known is not None else f"unknown fault code {fault_code}"
     return MitReply(
         motor_id=data[0],
         feedback=MotorFeedback(

@@ -264,7 +264,9 @@ def test_damiao_watchdog_stops_the_motor_and_reports_lost_communication(channel)
         assert bus.read_register(DamiaoRegister.TIMEOUT) == {1: 1000}
         bus.enable()
         bus.exchange({1: MotorCommand(torque_Nm=3.0)})
-        assert motor.torque_Nm() == pytest.approx(3.0, abs=torque_step(J4310))
+        # (the command log, not the live torque: a stalled test could outlast 50 ms here)
+        assert motor.received[-1].kind == "command"
+        assert motor.received[-1].command.torque_Nm == pytest.approx(3.0, abs=torque_step(J4310))
         time.sleep(0.08)  # no commands for longer than the timeout
         assert motor.torque_Nm() == 0.0
         assert motor.received[-1].kind == "watchdog"
