@@ -9,9 +9,10 @@ code). Damiao DM-J motors pack their commands the same way
 in :mod:`clients.bridge.protocols.can_io`.
 
 Sources:
-    - B. Katz, *motorcontrol* firmware (``math_ops.c`` ``float_to_uint`` /
-      ``uint_to_float``, ``CAN_com.c`` ``pack_reply`` / ``unpack_cmd``): the
-      field packing, truncating conversion, and the special frames.
+    - B. Katz, *motorcontrol* firmware (``float_to_uint`` / ``uint_to_float``,
+      ``pack_reply`` / ``unpack_cmd``), as reproduced in the CubeMars manual's
+      example code (the firmware repository itself was not consulted): field
+      packing, truncating conversion, special frames.
     - CubeMars, *AK Series Actuator Driver Manual* V1.0.8, §5.3 "MIT power
       mode communication protocol" (pp. 48–50,
       https://www.manualshelf.com/manual/cubemars/ak80-64-kv80/ak80-64-ak-series-actuator-driver-manual-v1-0-8-english-somali/page-49.html

@@ -12,7 +12,7 @@ from contextlib import contextmanager
 import can
 import pytest
 
-from clients.bridge.actuator import ZERO_COMMAND, BusError, MotorCommand
+from clients.bridge.actuator import ZERO_COMMAND, ActuatorBus, BusError, MotorCommand
 from clients.bridge.emulators.damiao import EmulatedDamiao
 from clients.bridge.emulators.mit import EmulatedMitActuator
 from clients.bridge.emulators.motor import CanDeviceHost, EmulatedMotor
@@ -60,6 +60,25 @@ def serving(channel, devices):
 
 def kinds(motor):
     return [received.kind for received in motor.received]
+
+
+@pytest.mark.parametrize("bus_class", [MitBus, DamiaoBus])
+def test_buses_offer_every_verb_of_the_actuator_bus(bus_class):
+    verbs = {name for name in vars(ActuatorBus) if not name.startswith("_")}
+    verbs |= set(ActuatorBus.__annotations__)
+    assert verbs == {
+        "name",
+        "actuator_ids",
+        "exchange",
+        "enable",
+        "arm_watchdog",
+        "hold_safe",
+        "clear_faults",
+        "disable",
+        "close",
+    }
+    for verb in verbs - {"name", "actuator_ids"}:
+        assert callable(getattr(bus_class, verb)), verb
 
 
 # --- MIT ----------------------------------------------------------------------------------
