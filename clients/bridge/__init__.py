@@ -8,3 +8,5 @@ Dynamixel Protocol 2.0) are pure encode/decode functions in
 actuators that answer byte for byte like the real ones are in
 :mod:`clients.bridge.emulators`.
 """
+
+__all__: list[str] = []

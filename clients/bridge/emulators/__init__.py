@@ -6,3 +6,5 @@ a first-order thermal model and injectable faults). A plant
 (:class:`clients.bridge.plant.Plant`) puts each motor on a joint of a
 simulated robot, so a whole robot runs through the bridge without hardware.
 """
+
+__all__: list[str] = []
