@@ -27,6 +27,7 @@ Current and one sync read of Present Current … Present Temperature per tick.
 
 from __future__ import annotations
 
+import itertools
 import math
 import select
 import time
@@ -43,6 +44,7 @@ __all__ = [
     "BUS_WATCHDOG_UNIT_S",
     "CURRENT_UNIT_A",
     "DYNAMIXEL_MODELS",
+    "EEPROM_END",
     "FEEDBACK_LENGTH_BYTES",
     "FEEDBACK_START",
     "HEADER",
@@ -68,6 +70,7 @@ __all__ = [
     "current_from_torque",
     "decode_feedback",
     "describe_hardware_error",
+    "get_model",
     "goal_current_from_torque",
     "make_packet",
     "make_ping",
@@ -811,7 +814,12 @@ DYNAMIXEL_MODELS: Mapping[str, DynamixelModel] = {
 """Supported servos by name (model numbers and Current Limit from their control tables)."""
 
 
-def _model_of(model: DynamixelModel | str) -> DynamixelModel:
+def get_model(model: DynamixelModel | str) -> DynamixelModel:
+    """The catalogue entry for a model name (a model passes through).
+
+    Raises:
+        CommandError: The name is not in :data:`DYNAMIXEL_MODELS`.
+    """
     if isinstance(model, DynamixelModel):
         return model
     try:
@@ -824,7 +832,7 @@ def _model_of(model: DynamixelModel | str) -> DynamixelModel:
 
 def _interpolate(points: tuple[tuple[float, float], ...], x: float) -> float:
     """Piecewise-linear y(x) for increasing x ≥ 0, extrapolating the last segment."""
-    for (x0, y0), (x1, y1) in zip(points, points[1:], strict=False):
+    for (x0, y0), (x1, y1) in itertools.pairwise(points):
         if x <= x1:
             return y0 + (y1 - y0) * (x - x0) / (x1 - x0)
     (x0, y0), (x1, y1) = points[-2], points[-1]
@@ -833,14 +841,14 @@ def _interpolate(points: tuple[tuple[float, float], ...], x: float) -> float:
 
 def torque_from_current(model: DynamixelModel | str, current_A: float) -> float:
     """Output torque (N·m) the servo makes at ``current_A`` (odd: sign follows current)."""
-    spec = _model_of(model)
+    spec = get_model(model)
     magnitude = _interpolate(spec.torque_table, abs(current_A))
     return math.copysign(magnitude, current_A) if current_A else 0.0
 
 
 def current_from_torque(model: DynamixelModel | str, torque_Nm: float) -> float:
     """Current (A) that makes ``torque_Nm`` (the inverse of :func:`torque_from_current`)."""
-    spec = _model_of(model)
+    spec = get_model(model)
     inverse = tuple((torque, current) for current, torque in spec.torque_table)
     magnitude = _interpolate(inverse, abs(torque_Nm))
     return math.copysign(magnitude, torque_Nm) if torque_Nm else 0.0
@@ -855,7 +863,7 @@ def goal_current_from_torque(model: DynamixelModel | str, torque_Nm: float) -> i
     Raises:
         CommandError: ``torque_Nm`` is NaN or infinite (never sent).
     """
-    spec = _model_of(model)
+    spec = get_model(model)
     if not math.isfinite(torque_Nm):
         raise CommandError(-1, "torque_Nm", f"{torque_Nm=} is not finite; nothing was sent")
     torque_Nm = max(-spec.stall_torque_Nm, min(spec.stall_torque_Nm, torque_Nm))
@@ -934,7 +942,7 @@ class DynamixelBus:
             if not 0 <= servo_id <= MAX_ID:
                 raise CommandError(servo_id, "id", f"{servo_id=} is not 0–252")
             try:
-                self._state[servo_id] = _ServoState(_model_of(model_name))
+                self._state[servo_id] = _ServoState(get_model(model_name))
             except CommandError as error:
                 raise CommandError(servo_id, "model", error.detail) from None
         self.actuator_ids = tuple(sorted(self._state))
