@@ -43,19 +43,26 @@ def kinds_after(motor, start_s):
 
 def test_start_up_reads_every_actuator_with_zero_commands_before_enabling(server):
     with open_bridge(example(), server.endpoint, emulate=True) as session:
-        session.bridge.start()
-        for name, motor in session.emulation.motors.items():
+        bridge = session.bridge
+        bridge.start()
+        plant_q = bridge.joint_map.motor_position_rad(
+            session.emulation.plant.backend.state().joint_position
+        )
+        for i, (name, motor) in enumerate(session.emulation.motors.items()):
             kinds = [record.kind for record in motor.received]
             first_enable = kinds.index("enable")
-            assert first_enable >= 1, name  # read before enabling
-            before = motor.received[:first_enable]
+            before = motor.received[:first_enable]  # a disabled MIT motor applies nothing
             assert all(r.command.torque_Nm == 0 and r.command.kp_Nm_per_rad == 0 for r in before)
             after = [r for r in motor.received[first_enable + 1 :] if r.kind != "enable"]
-            assert after and after[0].command.torque_Nm == 0.0, name  # no kick once enabled
+            assert after and after[0].kind == "safe", name  # zero torque once enabled: no kick
+            assert bridge.report.links[i].replies == 2, name  # read, then read after enabling
+        np.testing.assert_allclose(  # the positions were read (16-bit quantized)
+            bridge.joint_map.motor_position_rad(bridge.joint_position_rad), plant_q, atol=4e-4
+        )
         ticks(session, 50)
-        assert session.bridge.report.commands == 50
-        assert not session.bridge.latch.latched
-        session.bridge.shutdown()
+        assert bridge.report.commands == 50
+        assert not bridge.latch.latched
+        bridge.shutdown()
         assert all(m.received[-1].kind == "disable" for m in session.emulation.motors.values())
 
 
