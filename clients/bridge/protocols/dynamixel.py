@@ -42,6 +42,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import IntEnum, IntFlag
 
+import dynamixel_sdk as sdk
+
 from clients.bridge.actuator import BusError, MotorCommand, MotorFeedback
 from protocol.errors import PoiseError
 
@@ -151,6 +153,9 @@ class StatusError(IntEnum):
     DATA_LENGTH = 0x05, "data length error: fewer bytes than the register holds"
     DATA_LIMIT = 0x06, "data limit error: value beyond the register's limit"
     ACCESS = 0x07, "access error: read-only/undefined address, or EEPROM written with torque on"
+
+
+_STATUS_BY_NUMBER: dict[int, StatusError] = {int(error): error for error in StatusError}
 
 
 class HardwareError(IntFlag):
@@ -490,10 +495,7 @@ class Packet:
     def status_error(self) -> StatusError | int:
         """The error number without the alert bit (an int if it is not a known one)."""
         number = self.error & 0x7F
-        try:
-            return StatusError(number)
-        except ValueError:
-            return number
+        return _STATUS_BY_NUMBER.get(number, number)
 
 
 def _check_id(packet_id: int, *, broadcast: bool = True) -> None:
@@ -681,7 +683,7 @@ def pack_register(register: ControlTable, value: int) -> bytes:
         ) from error
 
 
-def unpack_register(register: ControlTable, data: bytes) -> int:
+def unpack_register(register: ControlTable, data: bytes | bytearray) -> int:
     """A register value from its little-endian bytes."""
     return int.from_bytes(
         bytes(data[: REGISTER_SIZE_BYTES[register]]), "little", signed=register in SIGNED_REGISTERS
@@ -881,13 +883,6 @@ def goal_current_from_torque(model: DynamixelModel | str, torque_Nm: float) -> i
 # --------------------------------------------------------------------------- bus
 
 
-def _sdk():
-    """Import dynamixel-sdk lazily, so the pure functions need no serial stack."""
-    import dynamixel_sdk
-
-    return dynamixel_sdk
-
-
 def _port_handler(port: str, reply_timeout_s: float):
     """A dynamixel-sdk PortHandler whose status timeout is ``reply_timeout_s``.
 
@@ -896,7 +891,6 @@ def _port_handler(port: str, reply_timeout_s: float):
     timer; set that timer to 1 ms (``/sys/bus/usb-serial/devices/ttyUSB*/
     latency_timer``) on real hardware and give the bus a matching timeout.
     """
-    sdk = _sdk()
 
     class _TimedPortHandler(sdk.PortHandler):
         def setPacketTimeout(self, packet_length: int) -> None:
@@ -967,7 +961,6 @@ class DynamixelBus:
             except CommandError as error:
                 raise CommandError(servo_id, "model", error.detail) from None
         self.actuator_ids = tuple(sorted(self._state))
-        sdk = _sdk()
         self._port = _port_handler(self.port, self.reply_timeout_s)
         try:
             opened = self._port.openPort() and self._port.setBaudRate(self.baudrate)
@@ -1089,7 +1082,6 @@ class DynamixelBus:
     # ----------------------------------------------------------------- helpers
 
     def _check_result(self, result: int, what: str) -> None:
-        sdk = _sdk()
         if result in (sdk.COMM_PORT_BUSY, sdk.COMM_TX_FAIL, sdk.COMM_TX_ERROR):
             raise BusError(self.name, f"{what}: {self._packets.getTxRxResult(result)}")
 
@@ -1104,7 +1096,7 @@ class DynamixelBus:
         self._check_result(result, f"write {register.name}={value} to servo {servo_id}")
         if missing_ok:
             return
-        if result != _sdk().COMM_SUCCESS:
+        if result != sdk.COMM_SUCCESS:
             raise BusError(
                 self.name,
                 f"servo {servo_id} did not acknowledge {register.name}={value} "
@@ -1124,7 +1116,7 @@ class DynamixelBus:
             result = group.txPacket()
         except OSError as error:
             raise BusError(self.name, f"sync write Goal Current: {error}") from error
-        if result != _sdk().COMM_SUCCESS:
+        if result != sdk.COMM_SUCCESS:
             raise BusError(
                 self.name, f"sync write Goal Current: {self._packets.getTxRxResult(result)}"
             )
@@ -1135,7 +1127,7 @@ class DynamixelBus:
             result = self._feedback.txPacket()
         except OSError as error:
             raise BusError(self.name, f"sync read: {error}") from error
-        if result != _sdk().COMM_SUCCESS:
+        if result != sdk.COMM_SUCCESS:
             self._port.is_using = False
             raise BusError(self.name, f"sync read: {self._packets.getTxRxResult(result)}")
         replies = self._collect(set(self.actuator_ids))
@@ -1200,4 +1192,4 @@ class DynamixelBus:
             self._port, servo_id, ControlTable.HARDWARE_ERROR_STATUS
         )
         self._check_result(result, f"read Hardware Error Status of servo {servo_id}")
-        return value if result == _sdk().COMM_SUCCESS else 0
+        return value if result == sdk.COMM_SUCCESS else 0
