@@ -34,7 +34,7 @@ SERVOS = {1: "XM430-W350", 2: "XH430-W350", 3: "XM540-W270", 4: "XH540-W270"}
 @pytest.fixture
 def rig():
     with DynamixelEmulator(SERVOS, return_delay_s=100e-6) as emulator:
-        bus = DynamixelBus(emulator.port, SERVOS, name="dxl", reply_timeout_s=0.01)
+        bus = DynamixelBus(emulator.port, SERVOS, name="dxl", reply_timeout_s=0.05)
         try:
             yield emulator, bus
         finally:
