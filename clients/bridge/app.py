@@ -102,6 +102,7 @@ def open_bridge(
     curve: CurveKeys | None = None,
     operator: queue.Queue[str] | None = None,
     timeout_s: float = 10.0,
+    wall_clock: bool = False,
 ) -> Iterator[BridgeSession]:
     """Connect, check the map against the server, open the buses (or emulate them).
 
@@ -113,6 +114,8 @@ def open_bridge(
         curve: CURVE keys for a server that requires them.
         operator: Operator commands (``estop``, ``rearm``, ``quit``).
         timeout_s: Wait for the server's handshake.
+        wall_clock: With ``emulate``, pace by the wall clock (the emulated
+            robot then stands still): for timing the loop.
 
     Raises:
         BridgeConfigError: The map does not match the server's joints, or a
@@ -156,7 +159,7 @@ def open_bridge(
         if emulate:
             from clients.bridge.emulation import Emulation
 
-            emulation = stack.enter_context(Emulation(config, welcome, joint_map))
+            emulation = stack.enter_context(Emulation(config, welcome, joint_map, wall_clock))
             overrides = emulation.bus_overrides
             pacer = emulation.pacer(period_s)
             if settings.base_state == "simulator":
@@ -164,7 +167,13 @@ def open_bridge(
         buses = open_buses(config, overrides)
         for bus in buses.values():
             stack.callback(bus.close)
-        bridge = Bridge(settings, joint_map, buses, client, base, pacer, model, operator, timeout_s)
+        # The safe state must reach the actuators within the watchdog time: stop
+        # waiting for the server early by what one safe exchange may take (the
+        # buses answer one after another, each within its reply timeout).
+        margin_s = 0.001 + sum(spec.reply_timeout_s for spec in config.buses.values())
+        bridge = Bridge(
+            settings, joint_map, buses, client, base, pacer, model, operator, timeout_s, margin_s
+        )
         yield BridgeSession(bridge, emulation)
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import time
 from contextlib import ExitStack
 from typing import Any
 
@@ -25,7 +26,7 @@ from clients.bridge.emulators.mit import EmulatedMitActuator
 from clients.bridge.emulators.motor import CanDevice, CanDeviceHost, EmulatedMotor
 from clients.bridge.emulators.odrive import EmulatedODrive
 from clients.bridge.joint_map import JointMap
-from clients.bridge.plant import Plant, PlantPacer
+from clients.bridge.plant import Plant, PlantPacer, RealTimePacer
 from clients.bridge.protocols.damiao import DAMIAO_MOTOR_MODELS
 from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
 from clients.sim.backend import PhysicsBackend
@@ -44,7 +45,9 @@ class Emulation:
     """The emulated actuators and the simulated robot of one bridge run.
 
     A context manager: entering starts the emulators' threads, leaving stops
-    them and closes their channels and pseudo-terminals.
+    them and closes their channels and pseudo-terminals. The emulated motors
+    keep time by the simulated robot's clock, or with ``wall_clock`` by
+    ``time.monotonic``, like the loop's pacer (:meth:`pacer`).
 
     Attributes:
         plant: The simulated robot.
@@ -55,8 +58,17 @@ class Emulation:
             reach the emulators instead of the map's interfaces.
     """
 
-    def __init__(self, config: BridgeConfig, welcome: Welcome, joint_map: JointMap):
+    def __init__(
+        self,
+        config: BridgeConfig,
+        welcome: Welcome,
+        joint_map: JointMap,
+        wall_clock: bool = False,
+    ):
         self._stack = ExitStack()
+        self.wall_clock = wall_clock
+        # The motors' own clock (their watchdogs, the times they log) is the loop's.
+        clock = time.monotonic if wall_clock else (lambda: self.plant.time_s)
         self.motors: dict[str, EmulatedMotor] = {}
         self.devices: dict[str, Any] = {}
         self.bus_overrides: dict[str, dict[str, Any]] = {}
@@ -67,7 +79,7 @@ class Emulation:
             if peak == float("inf"):
                 limit = joint_map.torque_limit_Nm[joint_map.names.index(name)]
                 peak = min(ODRIVE_PEAK_TORQUE_NM, limit / actuator.gear_ratio)
-            self.motors[name] = EmulatedMotor(torque_limit_Nm=peak)
+            self.motors[name] = EmulatedMotor(torque_limit_Nm=peak, clock=clock)
         self._servers: list[Any] = []
         for bus_name, spec in config.buses.items():
             joints = config.joints_on(bus_name)
@@ -105,7 +117,10 @@ class Emulation:
         self, protocol: str, actuator_id: int, motor: str, master_id: int | None, joint: str
     ) -> CanDevice:
         if protocol == "mit":
-            return EmulatedMitActuator(actuator_id, self.motors[joint], MIT_MOTOR_MODELS[motor])
+            # CubeMars AK firmware answers with 8 bytes (temperature, error code).
+            return EmulatedMitActuator(
+                actuator_id, self.motors[joint], MIT_MOTOR_MODELS[motor], reply_length=8
+            )
         if protocol == "damiao":
             return EmulatedDamiao(
                 actuator_id,
@@ -115,9 +130,13 @@ class Emulation:
             )
         return EmulatedODrive(actuator_id, self.motors[joint])
 
-    def pacer(self, period_s: float) -> PlantPacer:
-        """Paces the bridge by the plant."""
-        return PlantPacer(self.plant, period_s)
+    def pacer(self, period_s: float) -> PlantPacer | RealTimePacer:
+        """Paces the bridge by the plant; with ``wall_clock``, by the wall clock.
+
+        On the wall clock the plant does not move (the robot hangs still):
+        for measuring the loop's real-time behaviour, e.g. its watchdog.
+        """
+        return RealTimePacer(period_s) if self.wall_clock else PlantPacer(self.plant, period_s)
 
     def __enter__(self) -> Emulation:
         # Servers stop before their channels close (the stack unwinds in reverse).

@@ -196,6 +196,9 @@ class Bridge:
         operator: Operator commands (``"estop"``, ``"rearm"``, ``"quit"``),
             read once per tick.
         connect_timeout_s: How long a re-arm waits for the server's handshake.
+        safe_margin_s: How long before the watchdog expires the wait for the
+            server ends, so that the safe state reaches the actuators within
+            ``watchdog_s`` of the last valid command (an exchange's worth).
     """
 
     def __init__(
@@ -209,6 +212,7 @@ class Bridge:
         model: pin.Model,
         operator: queue.Queue[str] | None = None,
         connect_timeout_s: float = 10.0,
+        safe_margin_s: float = 0.003,
     ):
         self.connect_timeout_s = connect_timeout_s
         self.settings = settings
@@ -220,7 +224,12 @@ class Bridge:
         self.model = model
         self.operator: queue.Queue[str] = operator if operator is not None else queue.Queue()
         self.latch = SafetyLatch()
-        self.watchdog = Watchdog(settings.watchdog_s)
+        # One clock for the watchdog and the state's time: the pacer's (the wall clock
+        # on hardware; with emulation, the simulated robot's, whose time a stall of
+        # this process does not advance).
+        self.watchdog = Watchdog(settings.watchdog_s, clock=pacer.now_s)
+        self._origin_s = pacer.now_s()
+        self.safe_margin_s = safe_margin_s
         self.report = BridgeReport(
             links=[JointLink(ref.joint, ref.bus, ref.id) for ref in joint_map.actuators]
         )
@@ -384,6 +393,7 @@ class Bridge:
             feedback = self._exchange(self._commands)
         except BusError as exc:
             self._trip(str(exc))
+            self._hold_safe()  # on the buses that still work
             return
         self._absorb(feedback)
         reason = (
@@ -398,14 +408,8 @@ class Bridge:
             return
         command = self._step_server()
         if command is None:
-            if self.watchdog.remaining_s() <= 0.0 and not self.latch.latched:
-                self._trip(
-                    f"no valid command from the server for {self.settings.watchdog_s:g} s "
-                    "(the watchdog)"
-                )
-            if self.latch.latched:
-                self._hold_safe()
-            return  # the previous valid commands stay for one more tick
+            self._without_command()
+            return
         limit = self.joint_map.derated_torque_limit_Nm(self.temperature_C)
         try:
             torque, clamped = clamp_torque(
@@ -416,12 +420,28 @@ class Bridge:
         except InvalidCommand as exc:
             self.report.invalid_commands += 1
             log.warning("refused the server's command for seq %d: %s", command.seq, exc)
+            self._without_command()
             return
         self.report.clamped_torques += len(clamped)
         self._commands = self.joint_map.torque_commands(torque)
         self._held = command
         self.report.commands += 1
         self.watchdog.feed()
+
+    def _without_command(self) -> None:
+        """A tick without a valid command: the previous one holds, unless the watchdog ends.
+
+        The next chance of a valid command is a period away: if the watchdog
+        expires before it (less the time the safe state takes to go out), the
+        safe state latches now, so it reaches the actuators within ``watchdog_s``
+        of the last valid command.
+        """
+        if self.watchdog.remaining_s() <= self.safe_margin_s + self.pacer.period_s:
+            self._trip(
+                f"no valid command from the server for {self.settings.watchdog_s:g} s "
+                "(the watchdog)"
+            )
+            self._hold_safe()
 
     def _step_server(self) -> Command | None:
         """Send this tick's state; the server's command, or None (counted, logged)."""
@@ -435,12 +455,12 @@ class Bridge:
             reading.angular_velocity_base_in_base,
         )
         period_s = self.pacer.period_s
-        time_s = self.pacer.now_s()
+        time_s = self.pacer.now_s() - self._origin_s
         sent = measured
         if self._held is not None:  # the command decided now acts from the next tick
             sent = measured.predicted(period_s, self.model, self._held)
             time_s += period_s
-        remaining_s = self.watchdog.remaining_s()
+        remaining_s = self.watchdog.remaining_s() - self.safe_margin_s
         if remaining_s <= 0.0:
             return None
         self.client.timeout_s = remaining_s
@@ -498,6 +518,6 @@ class Bridge:
         self.temperature_C[known] = temperature[known]
 
     def _trip(self, reason: str) -> None:
-        if self.latch.trip(reason, self.pacer.now_s()):
+        if self.latch.trip(reason, self.pacer.now_s() - self._origin_s):
             self.report.latches.append(reason)
             log.error("safe state latched: %s; re-arm to resume", reason)

@@ -113,12 +113,11 @@ class RealTimePacer:
 
     def __init__(self, period_s: float):
         self.period_s = period_s
-        self._start_s = time.monotonic()
-        self._next_s = self._start_s + period_s
+        self._next_s = time.monotonic() + period_s
 
     def now_s(self) -> float:
-        """Time since the start (s)."""
-        return time.monotonic() - self._start_s
+        """``time.monotonic()`` (s)."""
+        return time.monotonic()
 
     def wait(self) -> bool:
         """Sleep until the next tick; True if it had already begun (an overrun).
