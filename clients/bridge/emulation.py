@@ -37,6 +37,14 @@ __all__ = ["Emulation"]
 
 _CHANNELS = itertools.count()
 
+SIMULATED_REPLY_TIMEOUT_S = 0.02
+"""Reply timeout of every bus when the simulated robot paces the loop.
+
+The emulators answer from threads of this process, so a reply can wait for
+the interpreter; in simulated time that costs the robot nothing, and the
+map's timeouts (a few ms, for hardware) would count such replies as missed.
+"""
+
 ODRIVE_PEAK_TORQUE_NM = 60.0
 """Torque an emulated ODrive's motor makes at most when the map gives no joint limit."""
 
@@ -103,6 +111,10 @@ class Emulation:
             self._servers.append(CanDeviceHost(host_bus, devices))
             self._stack.callback(host_bus.shutdown)
             self.bus_overrides[bus_name] = {"interface": "virtual", "channel": channel}
+        if not wall_clock:  # the robot's time stands still while this process is busy
+            for bus_name, spec in config.buses.items():
+                timeout_s = max(spec.reply_timeout_s, SIMULATED_REPLY_TIMEOUT_S)
+                self.bus_overrides[bus_name]["reply_timeout_s"] = timeout_s
         backend = _backend(config)
         backend.reset(standing_state(welcome, {}))
         self.plant = Plant(

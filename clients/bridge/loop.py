@@ -24,6 +24,7 @@ latches it and ends the run; every actuator is disabled on the way out.
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 import queue
@@ -320,6 +321,10 @@ class Bridge:
         """
         try:
             self.start()
+            # Everything loaded so far lives for the whole run: out of the collector's
+            # sight, a full collection takes ~1 ms instead of ~80 ms (a missed tick).
+            gc.collect()
+            gc.freeze()
             end_s = self.pacer.now_s() + duration_s if duration_s > 0 else math.inf
             previous_s = time.perf_counter()
             while not self.report.stopped:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -11,7 +12,21 @@ import can
 
 from clients.bridge.actuator import ZERO_COMMAND, MotorCommand
 
-__all__ = ["CanDevice", "CanDeviceHost", "EmulatedMotor", "ReceivedCommand"]
+__all__ = [
+    "RECEIVED_LOG_LENGTH",
+    "CanDevice",
+    "CanDeviceHost",
+    "EmulatedMotor",
+    "ReceivedCommand",
+]
+
+
+RECEIVED_LOG_LENGTH = 1000
+"""Commands each emulated motor remembers (2 s at 500 Hz).
+
+Bounded so that a long emulated run neither grows nor makes the garbage
+collector walk millions of records (an 80 ms pause, seen, misses replies).
+"""
 
 
 @dataclass(frozen=True)
@@ -37,18 +52,21 @@ class EmulatedMotor:
 
     Attributes:
         torque_limit_Nm: Peak torque the motor can make.
-        thermal_resistance_K_per_W: Winding to ambient (first-order model).
-        thermal_time_constant_s: How fast the winding heats up.
-        resistance_ohm / torque_constant_Nm_per_A: Copper losses
-            ``R (τ / k_t)²`` heat the winding.
-        clock: Time source of its watchdog (``time.monotonic``).
+        continuous_torque_Nm: Torque it can hold for ever (default: a third
+            of the peak, typical of the actuators emulated here).
+        temperature_rise_at_continuous_K: Winding temperature rise above
+            ambient, at steady state, holding ``continuous_torque_Nm``. Copper
+            losses go with the square of the current, so with ``τ²``.
+        thermal_time_constant_s: How fast the winding heats up (first order).
+        torque_constant_Nm_per_A: Torque per ampere (the current it reports).
+        clock: Time source of its watchdog and of ``received`` (``time.monotonic``).
     """
 
     torque_limit_Nm: float
-    resistance_ohm: float = 0.2
-    torque_constant_Nm_per_A: float = 0.1
-    thermal_resistance_K_per_W: float = 2.0
+    continuous_torque_Nm: float = 0.0
+    temperature_rise_at_continuous_K: float = 60.0
     thermal_time_constant_s: float = 60.0
+    torque_constant_Nm_per_A: float = 0.1
     ambient_C: float = 25.0
     clock: Callable[[], float] = time.monotonic
     position_rad: float = 0.0
@@ -62,7 +80,10 @@ class EmulatedMotor:
     """Latched fault (protocol's code); a faulted motor makes no torque."""
     watchdog_timeout_s: float = 0.0
     """Its own command watchdog (0: off)."""
-    received: list[ReceivedCommand] = field(default_factory=list)
+    received: deque[ReceivedCommand] = field(
+        default_factory=lambda: deque(maxlen=RECEIVED_LOG_LENGTH)
+    )
+    """The newest commands it took, oldest first (a ring: a long run stays small)."""
     _last_command_s: float = 0.0
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
@@ -118,9 +139,9 @@ class EmulatedMotor:
 
     def heat(self, torque_Nm: float, duration_s: float) -> None:
         """Advance the winding temperature: copper losses in, conduction out."""
-        current_A = torque_Nm / self.torque_constant_Nm_per_A
-        steady_C = self.ambient_C + self.thermal_resistance_K_per_W * (
-            self.resistance_ohm * current_A * current_A
+        continuous = self.continuous_torque_Nm or self.torque_limit_Nm / 3.0
+        steady_C = (
+            self.ambient_C + self.temperature_rise_at_continuous_K * (torque_Nm / continuous) ** 2
         )
         self.temperature_C += (steady_C - self.temperature_C) * min(
             1.0, duration_s / self.thermal_time_constant_s

@@ -47,9 +47,9 @@ def test_start_up_reads_every_actuator_with_zero_commands_before_enabling(server
         for i, (name, motor) in enumerate(session.emulation.motors.items()):
             kinds = [record.kind for record in motor.received]
             first_enable = kinds.index("enable")
-            before = motor.received[:first_enable]  # a disabled MIT motor applies nothing
+            before = list(motor.received)[:first_enable]  # a disabled MIT motor applies nothing
             assert all(r.command.torque_Nm == 0 and r.command.kp_Nm_per_rad == 0 for r in before)
-            after = [r for r in motor.received[first_enable + 1 :] if r.kind != "enable"]
+            after = [r for r in list(motor.received)[first_enable + 1 :] if r.kind != "enable"]
             assert after and after[0].kind == "safe", name  # zero torque once enabled: no kick
             assert bridge.report.links[i].replies == 2, name  # read, then read after enabling
         np.testing.assert_allclose(  # the positions were read (16-bit quantized)
@@ -94,7 +94,7 @@ def test_an_actuator_going_silent_latches_the_safe_state_until_rearmed(server):
         for name, motor in session.emulation.motors.items():
             if motor is knee:  # silent: takes nothing
                 continue
-            later = motor.received[-21:]  # the latching tick and 20 more
+            later = list(motor.received)[-21:]  # the latching tick and 20 more
             assert all(r.kind == "safe" and r.command.kd_Nm_s_per_rad > 0 for r in later), name
             assert motor.received[-22].command.kd_Nm_s_per_rad == 0, name  # a torque command
         knee.silent = False
@@ -152,7 +152,7 @@ def test_torques_beyond_the_derated_limit_are_clamped_and_counted(server):
         ankle.temperature_C = 89.0  # 1 °C below its limit: derated to 5 %
         ticks(session, 30)
         limit = bridge.joint_map.torque_limit_Nm[bridge.joint_map.names.index("left_ankle_pitch")]
-        applied = [abs(r.command.torque_Nm) for r in ankle.received[-20:]]
+        applied = [abs(r.command.torque_Nm) for r in list(ankle.received)[-20:]]
         assert max(applied) <= 0.05 * limit + 0.1
         assert bridge.report.clamped_torques > 0
         ankle.temperature_C = 90.0
