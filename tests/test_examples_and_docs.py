@@ -39,7 +39,9 @@ def test_readme_commands_are_what_ci_runs():
     assert "poise demo" in readme
 
 
-@pytest.mark.parametrize("command", ["", "serve", "keygen", "demo", "sim", "replay", "log", "list"])
+@pytest.mark.parametrize(
+    "command", ["", "serve", "keygen", "demo", "sim", "bridge", "replay", "log", "list"]
+)
 def test_cli_help_runs_and_is_in_the_readme(command):
     args = [
         sys.executable,
@@ -63,6 +65,15 @@ def test_readme_documents_every_scenario_key_and_builtin_scenario():
             assert f"`{key}`" in readme, key
     for path in SCENARIO_DIR.glob("*.toml"):
         assert f"`{path.stem}`" in readme, path.stem
+
+
+def test_bridge_doc_documents_every_key_of_the_actuator_map():
+    from clients.bridge.config import BridgeSettings, BusSpec, EmulationSpec, JointActuator
+
+    doc = (ROOT / "docs" / "bridge.md").read_text()
+    for model in (BridgeSettings, BusSpec, JointActuator, EmulationSpec):
+        for key in model.model_fields:
+            assert f"| `{key}` |" in doc, key
 
 
 def test_parser_lists_every_subcommand():
