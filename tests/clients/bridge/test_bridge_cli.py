@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -27,10 +28,10 @@ def poise(*args: str, **options) -> subprocess.CompletedProcess[str]:
 
 
 def test_an_emulated_run_prints_timing_and_links_and_writes_its_report(tmp_path, server):
-    report = tmp_path / "report.json"
+    report, log = tmp_path / "report.json", tmp_path / "bridge.mcap"
     run = poise(
         "bridge", str(EXAMPLE), "--emulate", "--duration", "0.5",
-        "--connect", server.endpoint, "--report", str(report),
+        "--connect", server.endpoint, "--report", str(report), "--record", str(log),
     )  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert "stopped: duration; safe state latched 0 time(s)" in run.stdout
@@ -39,6 +40,10 @@ def test_an_emulated_run_prints_timing_and_links_and_writes_its_report(tmp_path,
     data = json.loads(report.read_text())
     assert data["ticks"] == 250 and data["commands"] == 251 and data["latches"] == []
     assert len(data["links"]) == 22 and data["emulation"]["fell"] is False
+    info = poise("log", "info", str(log))  # the session was recorded like any client's
+    assert info.returncode == 0, info.stderr
+    assert re.search(r"state sent\s+251\n", info.stdout), info.stdout
+    assert re.search(r"command received\s+251\n", info.stdout), info.stdout
 
 
 def test_estop_typed_on_stdin_holds_safe_disables_and_exits_1(server):

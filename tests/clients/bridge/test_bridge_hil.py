@@ -101,3 +101,21 @@ def test_a_killed_server_puts_every_actuator_in_its_safe_state_within_the_watchd
         f"({'wall clock' if wall_clock else 'simulated time'}), watchdog {1e3 * watchdog_s:.0f} ms"
     )
     assert max(delays) <= watchdog_s
+
+
+def test_the_revolute_humanoid_stands_on_odrives(server):
+    """Every joint on an emulated ODrive (torque control, float32 torques): 2 s standing."""
+    config = load_bridge_config(EXAMPLES / "revolute_humanoid_mit.toml")
+    buses = {
+        name: spec.model_copy(update={"protocol": "odrive"}) for name, spec in config.buses.items()
+    }
+    joints = {
+        name: actuator.model_copy(update={"motor": "D6374", "torque_limit_Nm": 60.0})
+        for name, actuator in config.joints.items()
+    }
+    emulation = config.emulation.model_copy(update={"pushes": []})
+    config = config.model_copy(update={"buses": buses, "joints": joints, "emulation": emulation})
+    run = run_bridge(config, server.endpoint, emulate=True, duration_s=2.0)
+    assert run.fall_reason == "" and run.report.latches == []
+    assert run.report.commands == 1001
+    assert all(link.faults == 0 for link in run.report.links)

@@ -178,3 +178,21 @@ def test_a_map_for_another_robot_is_refused_naming_the_joints(server):
     with pytest.raises(BridgeConfigError, match="the actuator map does not match thesis_humanoid"):
         with open_bridge(config, server.endpoint, emulate=True):
             pass
+
+
+def test_a_bus_that_fails_latches_once_and_the_other_buses_hold_safe(server, caplog):
+    with open_bridge(example(), server.endpoint, emulate=True) as session:
+        bridge = session.bridge
+        bridge.start()
+        ticks(session, 10)
+        bridge.buses["right_leg"]._bus.shutdown()  # the interface goes down
+        with caplog.at_level("ERROR", logger="poise.bridge"):
+            ticks(session, 10)
+        assert bridge.latch.latched and "bus 'right_leg'" in bridge.report.latches[0]
+        lines = [record.getMessage() for record in caplog.records]
+        assert len(lines) == 2, lines  # the latch, and the bus that cannot hold safe: once each
+        assert lines[0].startswith("safe state latched: bus 'right_leg'")
+        for joint, motor in session.emulation.motors.items():
+            if not joint.startswith("right_") or "shoulder" in joint or "elbow" in joint:
+                assert motor.received[-1].kind == "safe", joint  # the working buses
+        bridge.shutdown()
