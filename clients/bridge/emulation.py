@@ -75,6 +75,7 @@ class Emulation:
     ):
         self._stack = ExitStack()
         self.wall_clock = wall_clock
+        self.plant: Plant
         # The motors' own clock (their watchdogs, the times they log) is the loop's.
         clock = time.monotonic if wall_clock else (lambda: self.plant.time_s)
         self.motors: dict[str, EmulatedMotor] = {}

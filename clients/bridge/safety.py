@@ -100,10 +100,10 @@ def clamp_torque(
         )
     bad = ~np.isfinite(torque)
     if bad.any():
-        joints = [f"{names[i]}={torque[i]}" for i in np.flatnonzero(bad)]
+        joints = [f"{names[i]}={torque[i]}" for i in np.flatnonzero(bad).tolist()]
         raise InvalidCommand(f"joint_torque is not finite at {', '.join(joints)}")
     over = np.abs(torque) > limit_Nm
-    return np.clip(torque, -limit_Nm, limit_Nm), [names[i] for i in np.flatnonzero(over)]
+    return np.clip(torque, -limit_Nm, limit_Nm), [names[i] for i in np.flatnonzero(over).tolist()]
 
 
 def check_joints(
