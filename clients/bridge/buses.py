@@ -20,9 +20,10 @@ from clients.bridge.actuator import ActuatorBus, BusError
 from clients.bridge.config import BridgeConfig, BridgeConfigError, BusSpec, JointActuator
 from clients.bridge.protocols.can_io import DamiaoBus, MitBus
 from clients.bridge.protocols.damiao import DAMIAO_MOTOR_MODELS, DamiaoMotor
-from clients.bridge.protocols.dynamixel import DYNAMIXEL_MODELS, DynamixelBus
+from clients.bridge.protocols.dynamixel import DYNAMIXEL_MODELS
+from clients.bridge.protocols.dynamixel_bus import DynamixelBus
 from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
-from clients.bridge.protocols.odrive import ODriveBus
+from clients.bridge.protocols.odrive_bus import ODriveBus
 
 __all__ = ["check_motors", "motor_catalogue", "motor_peak_torque_Nm", "open_buses"]
 

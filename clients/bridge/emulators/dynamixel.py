@@ -1,6 +1,6 @@
 """Dynamixel X-series servos on a pseudo-terminal, answering Protocol 2.0 like the real ones.
 
-A host (``dynamixel-sdk``, :class:`~clients.bridge.protocols.dynamixel.DynamixelBus`)
+A host (``dynamixel-sdk``, :class:`~clients.bridge.protocols.dynamixel_bus.DynamixelBus`)
 opens :attr:`DynamixelEmulator.port` as its serial port. A thread parses the
 instruction packets with :class:`~clients.bridge.protocols.dynamixel.PacketReader`
 and answers from a control table per servo (a ``bytearray`` at the real

@@ -25,9 +25,10 @@ from clients.bridge.emulators.motor import CanDeviceHost, EmulatedMotor
 from clients.bridge.emulators.odrive import EmulatedODrive
 from clients.bridge.protocols.can_io import DamiaoBus, MitBus
 from clients.bridge.protocols.damiao import DAMIAO_MOTOR_MODELS, DamiaoMotor
-from clients.bridge.protocols.dynamixel import DYNAMIXEL_MODELS, DynamixelBus
+from clients.bridge.protocols.dynamixel import DYNAMIXEL_MODELS
+from clients.bridge.protocols.dynamixel_bus import DynamixelBus
 from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
-from clients.bridge.protocols.odrive import ODriveBus
+from clients.bridge.protocols.odrive_bus import ODriveBus
 from protocol.errors import PoiseError
 
 PROTOCOLS = ["mit", "damiao", "odrive", "dynamixel"]

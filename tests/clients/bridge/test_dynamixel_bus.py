@@ -17,7 +17,6 @@ from clients.bridge.protocols.dynamixel import (
     VELOCITY_UNIT_RAD_S,
     CommandError,
     ControlTable,
-    DynamixelBus,
     HardwareError,
     OperatingMode,
     PacketReader,
@@ -27,6 +26,7 @@ from clients.bridge.protocols.dynamixel import (
     make_write,
     torque_from_current,
 )
+from clients.bridge.protocols.dynamixel_bus import DynamixelBus
 
 SERVOS = {1: "XM430-W350", 2: "XH430-W350", 3: "XM540-W270", 4: "XH540-W270"}
 

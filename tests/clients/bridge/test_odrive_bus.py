@@ -24,11 +24,11 @@ from clients.bridge.protocols.odrive import (
     Firmware,
     Heartbeat,
     InvalidCommand,
-    ODriveBus,
     make_encoder_estimates,
     make_heartbeat,
     split_arbitration_id,
 )
+from clients.bridge.protocols.odrive_bus import ODriveBus
 
 REPLY_TIMEOUT_S = 0.05  # generous: the machine is shared; complete exchanges return early
 _channels = itertools.count()
