@@ -37,6 +37,14 @@ __all__ = ["Emulation"]
 
 _CHANNELS = itertools.count()
 
+CAN_REPLY_DELAY_S = 150e-6
+"""How long an emulated CAN actuator takes to answer on the wall clock.
+
+Real ones answer 100–300 µs after a command (the firmware's CAN interrupt,
+then one 8-byte frame, about 130 µs at 1 Mbit/s); in simulated time the
+robot's clock stands still meanwhile, so no delay is added there.
+"""
+
 SIMULATED_REPLY_TIMEOUT_S = 0.02
 """Reply timeout of every bus when the simulated robot paces the loop.
 
@@ -109,7 +117,8 @@ class Emulation:
                 self.devices[joint] = device
                 devices.append(device)
             host_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-            self._servers.append(CanDeviceHost(host_bus, devices))
+            reply_delay_s = CAN_REPLY_DELAY_S if wall_clock else 0.0
+            self._servers.append(CanDeviceHost(host_bus, devices, reply_delay_s))
             self._stack.callback(host_bus.shutdown)
             self.bus_overrides[bus_name] = {"interface": "virtual", "channel": channel}
         if not wall_clock:  # the robot's time stands still while this process is busy
