@@ -147,12 +147,13 @@ def dynamixel_rig(stack: ExitStack, n: int):
 
     def echo() -> None:
         while not stop.is_set():
-            try:
-                data = os.read(master, 4096)
-            except OSError:  # the pty closed: the benchmark is over
-                return
-            if data:
-                os.write(master, bytes(reply_size))
+            received = 0
+            while received < len(request):  # one whole request, then one reply
+                try:
+                    received += len(os.read(master, len(request) - received))
+                except OSError:  # the pty closed: the benchmark is over
+                    return
+            os.write(master, bytes(reply_size))
 
     thread = threading.Thread(target=echo, daemon=True)
     thread.start()
