@@ -57,6 +57,9 @@ __all__ = ["Bridge", "BridgeReport", "BridgeStartError", "JointLink", "LoopTimin
 
 log = logging.getLogger("poise.bridge")
 
+STATUS_PERIOD_S = 5.0
+"""A status line (timing, link quality) is logged this often, at level INFO."""
+
 START_READ_ATTEMPTS = 3
 """Zero-command reads at start-up before a silent actuator refuses the start."""
 
@@ -326,6 +329,7 @@ class Bridge:
             gc.collect()
             gc.freeze()
             end_s = self.pacer.now_s() + duration_s if duration_s > 0 else math.inf
+            status_ticks = max(1, round(STATUS_PERIOD_S / self.pacer.period_s))
             previous_s = time.perf_counter()
             while not self.report.stopped:
                 tick_s = time.perf_counter()
@@ -341,12 +345,27 @@ class Bridge:
                 now = time.perf_counter()
                 self.report.timing.add(now - previous_s, work_s)
                 previous_s = now
+                if self.report.timing.ticks % status_ticks == 0:
+                    log.info("%s", self.status())
         except KeyboardInterrupt:
             self.estop("interrupted (SIGINT/SIGTERM)")
             self.report.stopped = "interrupted"
         finally:
             self.shutdown()
         return self.report
+
+    def status(self) -> str:
+        """One line: loop timing and link quality so far (logged every few seconds)."""
+        timing, links = self.report.timing, self.report.links
+        hottest = max(links, key=lambda link: np.nan_to_num(link.temperature_C, nan=-np.inf))
+        return (
+            f"{timing.ticks} ticks, period {1e3 * timing.period_mean_s:.2f} ms "
+            f"± {1e3 * timing.jitter_s:.2f}, {timing.overruns} overruns, "
+            f"{sum(link.missed for link in links)} missed replies, "
+            f"{sum(link.faults for link in links)} faults, hottest {hottest.joint} "
+            f"{hottest.temperature_C:.0f} °C, "
+            f"{'SAFE: ' + self.latch.reason if self.latch.latched else 'running'}"
+        )
 
     def estop(self, why: str) -> None:
         """Latch the safe state now and command it once (the run then ends)."""
