@@ -22,7 +22,12 @@ from typing import TYPE_CHECKING, Any
 import pinocchio as pin
 
 from clients.bridge.base_state import BaseStateSource, FixedBase, SimulatorBase
-from clients.bridge.buses import check_motors, motor_peak_torque_Nm, open_buses
+from clients.bridge.buses import (
+    bus_time_per_tick_s,
+    check_motors,
+    motor_peak_torque_Nm,
+    open_buses,
+)
 from clients.bridge.config import BridgeConfig, BridgeConfigError, check_against_welcome
 from clients.bridge.joint_map import JointMap
 from clients.bridge.loop import Bridge, BridgeReport, Pacer
@@ -44,6 +49,9 @@ __all__ = [
 ]
 
 log = logging.getLogger("poise.bridge")
+
+BUS_LOAD_WARNING = 0.8
+"""A bus whose exchange needs more than this fraction of the period is warned about."""
 
 DIAGNOSTICS_PERIOD_TICKS = 100
 """The bridge asks for diagnostics every this many ticks (they cost the server time)."""
@@ -131,6 +139,18 @@ def open_bridge(
             '--emulate, or set base_state = "fixed" for a robot on a stand'
         )
     period_s = 1.0 / settings.rate_hz
+    for name, spec in config.buses.items():
+        busy_s = bus_time_per_tick_s(spec, len(config.joints_on(name)))
+        if busy_s > BUS_LOAD_WARNING * period_s:
+            log.warning(
+                "bus %r: its %d actuators need at least %.2f ms of bus time per tick, "
+                "%.0f%% of the %.2f ms period; split them over more buses or lower rate_hz",
+                name,
+                len(config.joints_on(name)),
+                1e3 * busy_s,
+                100 * busy_s / period_s,
+                1e3 * period_s,
+            )
     with ExitStack() as stack:
         client = stack.enter_context(
             ControllerClient(endpoint, timeout_s=timeout_s, curve=curve, record=record)

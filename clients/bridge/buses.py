@@ -25,7 +25,20 @@ from clients.bridge.protocols.dynamixel_bus import DynamixelBus
 from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
 from clients.bridge.protocols.odrive_bus import ODriveBus
 
-__all__ = ["check_motors", "motor_catalogue", "motor_peak_torque_Nm", "open_buses"]
+__all__ = [
+    "bus_time_per_tick_s",
+    "check_motors",
+    "motor_catalogue",
+    "motor_peak_torque_Nm",
+    "open_buses",
+]
+
+CAN_FRAME_BITS = 130
+"""An 8-byte standard CAN frame on the wire: 111 bits, plus stuff bits and the gap."""
+CAN_FRAMES_PER_ACTUATOR = {"mit": 2, "damiao": 2, "odrive": 5}
+"""Frames per actuator and tick: command and reply; ODrive's torque, two requests, two replies."""
+DYNAMIXEL_STATUS_BYTES = 32
+"""One servo's status packet in the sync read (11 bytes of frame, 21 of registers)."""
 
 
 def motor_catalogue(protocol: str) -> Mapping[str, Any] | None:
@@ -65,6 +78,20 @@ def motor_peak_torque_Nm(protocol: str, actuator: JointActuator) -> float:
     if protocol == "dynamixel":
         return float(model.stall_torque_Nm)
     return float(model.torque_max_Nm)
+
+
+def bus_time_per_tick_s(spec: BusSpec, actuators: int) -> float:
+    """The bus time one tick's exchange takes at least (s): the frames on the wire.
+
+    CAN: :data:`CAN_FRAMES_PER_ACTUATOR` frames of :data:`CAN_FRAME_BITS` at
+    ``bitrate``. Dynamixel: the sync write (14 + 3 bytes per servo), the sync
+    read (14 + 1) and one status packet per servo, 10 bits a byte at
+    ``baudrate`` (Return Delay Time not counted).
+    """
+    if spec.protocol == "dynamixel":
+        byte_count = 14 + 3 * actuators + 14 + actuators + DYNAMIXEL_STATUS_BYTES * actuators
+        return 10 * byte_count / spec.baudrate
+    return CAN_FRAMES_PER_ACTUATOR[spec.protocol] * actuators * CAN_FRAME_BITS / spec.bitrate
 
 
 def open_buses(

@@ -55,7 +55,8 @@ def write(tmp_path, text: str) -> Path:
 
 def test_the_example_map_loads():
     loaded = load_bridge_config(EXAMPLE)
-    assert len(loaded.joints) == 22 and set(loaded.buses) == {"left_leg", "right_leg", "upper_body"}
+    assert len(loaded.joints) == 22
+    assert set(loaded.buses) == {"left_leg", "right_leg", "left_arm", "right_arm"}
 
 
 def test_a_typo_gets_the_closest_key_of_its_own_table(tmp_path):
@@ -161,3 +162,17 @@ def test_joint_checks_name_the_joint_and_the_value():
     assert check_joints(joint_map, np.array([0, 1.02]), zeros, cool, margin_rad=0.05) == ""
     assert "a at 25.00 rad/s" in check_joints(joint_map, zeros, np.array([25.0, 0]), cool)
     assert "a's motor at 95 °C" in check_joints(joint_map, zeros, zeros, np.array([95.0, 20]))
+
+
+def test_bus_time_counts_the_frames_on_the_wire():
+    from clients.bridge.buses import bus_time_per_tick_s
+    from clients.bridge.config import BusSpec
+
+    # MIT: a command and a reply of 130 bits each per actuator, at 1 Mbit/s.
+    assert bus_time_per_tick_s(BusSpec(protocol="mit"), 6) == pytest.approx(6 * 2 * 130e-6)
+    assert bus_time_per_tick_s(BusSpec(protocol="odrive", bitrate=500_000), 2) == (
+        pytest.approx(2 * 5 * 130 / 500_000)
+    )
+    # Dynamixel: sync write 14 + 3n, sync read 14 + n, n status packets of 32 bytes.
+    spec = BusSpec(protocol="dynamixel", baudrate=4_000_000)
+    assert bus_time_per_tick_s(spec, 10) == pytest.approx(10 * (28 + 4 * 10 + 320) / 4e6)
