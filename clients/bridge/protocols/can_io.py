@@ -156,7 +156,36 @@ def _check_commands(name: str, known: Mapping[int, object], ids: Iterable[int]) 
         raise ValueError(f"bus {name!r} has no actuator {unknown} (it has {sorted(known)})")
 
 
-class MitBus(_CanBus):
+class _MitFramedBus(_CanBus):
+    """A bus of actuators commanded with MIT-mode frames (MIT and Damiao): one exchange."""
+
+    _ranges_by_id: dict[int, MitRanges]
+    actuator_ids: tuple[int, ...]
+
+    def _parse(self, message: can.Message) -> tuple[int, MotorFeedback] | None:
+        raise NotImplementedError
+
+    def exchange(self, commands: Mapping[int, MotorCommand]) -> dict[int, MotorFeedback | None]:
+        """Send each actuator its command (clamped to its ranges) and return its reply.
+
+        Raises:
+            BusError: The bus failed.
+            NonFiniteValue: A command holds NaN or ±inf (nothing is sent then).
+            ValueError: A command is for an actuator not on this bus.
+        """
+        _check_commands(self.name, self._ranges_by_id, commands)
+        frames = [_frame(i, make_command(c, self._ranges_by_id[i])) for i, c in commands.items()]
+        answers = self._round_trip(frames, commands, self._parse)
+        return {motor_id: answers.get(motor_id) for motor_id in commands}
+
+    def _special(self, code: int) -> None:
+        frame = make_special(code)
+        self._round_trip(
+            [_frame(i, frame) for i in self.actuator_ids], self.actuator_ids, self._parse
+        )
+
+
+class MitBus(_MitFramedBus):
     """MIT-mode actuators (bgkatz motorcontrol firmware, CubeMars AK) on one CAN bus.
 
     Commands go on each actuator's CAN id; replies come on ``master_id``
@@ -195,6 +224,7 @@ class MitBus(_CanBus):
                     f"it in one byte) and differ from master_id {master_id:#x}"
                 )
         self.ranges = dict(ranges)
+        self._ranges_by_id = self.ranges
         self.master_id = master_id
         self.actuator_ids = tuple(sorted(self.ranges))
 
@@ -206,25 +236,6 @@ class MitBus(_CanBus):
             return None
         reply = parse_reply(bytes(message.data), ranges)
         return reply.motor_id, reply.feedback
-
-    def exchange(self, commands: Mapping[int, MotorCommand]) -> dict[int, MotorFeedback | None]:
-        """Send each actuator its command (clamped to its ranges) and return its reply.
-
-        Raises:
-            BusError: The bus failed.
-            NonFiniteValue: A command holds NaN or ±inf (nothing is sent then).
-            ValueError: A command is for an actuator not on this bus.
-        """
-        _check_commands(self.name, self.ranges, commands)
-        frames = [_frame(i, make_command(c, self.ranges[i])) for i, c in commands.items()]
-        answers = self._round_trip(frames, commands, self._parse)
-        return {motor_id: answers.get(motor_id) for motor_id in commands}
-
-    def _special(self, code: int) -> None:
-        frame = make_special(code)
-        self._round_trip(
-            [_frame(i, frame) for i in self.actuator_ids], self.actuator_ids, self._parse
-        )
 
     def enable(self) -> None:
         """Enter motor mode on every actuator (``FF…FC``)."""
@@ -249,14 +260,15 @@ class MitBus(_CanBus):
         self._special(MitSpecial.EXIT_MOTOR_MODE)
 
 
-class DamiaoBus(_CanBus):
+class DamiaoBus(_MitFramedBus):
     """Damiao DM-J motors in MIT mode on one CAN bus.
 
     Commands go on each motor's CAN id (``ESC_ID``); feedback and register
     replies come on its master id (``MST_ID``), with the low nibble of its
     id in feedback byte 0. Motors may share a master id if the low nibbles
     of their ids differ. A disabled motor answers commands (status 0) but
-    does not apply them.
+    does not apply them. The feedback's ``fault`` / ``fault_code`` carry the
+    status nibble when it is a fault (8–E); disabled and enabled are not.
 
     Args:
         bus: An open python-can bus (closed by :meth:`close`).
@@ -275,6 +287,7 @@ class DamiaoBus(_CanBus):
     ):
         super().__init__(bus, name, reply_timeout_s)
         self.motors = dict(motors)
+        self._ranges_by_id = {motor_id: motor.ranges for motor_id, motor in self.motors.items()}
         self.actuator_ids = tuple(sorted(self.motors))
         self._by_reply: dict[tuple[int, int], int] = {}
         for motor_id, motor in self.motors.items():
@@ -300,28 +313,6 @@ class DamiaoBus(_CanBus):
         if motor_id is None:
             return None
         return motor_id, parse_feedback(bytes(message.data), self.motors[motor_id].ranges).feedback
-
-    def exchange(self, commands: Mapping[int, MotorCommand]) -> dict[int, MotorFeedback | None]:
-        """Send each motor its MIT command (clamped to its ranges) and return its feedback.
-
-        The feedback's ``fault`` / ``fault_code`` carry the status nibble when
-        it is a fault (8–E); disabled and enabled are not faults.
-
-        Raises:
-            BusError: The bus failed.
-            NonFiniteValue: A command holds NaN or ±inf (nothing is sent then).
-            ValueError: A command is for a motor not on this bus.
-        """
-        _check_commands(self.name, self.motors, commands)
-        frames = [_frame(i, make_command(c, self.motors[i].ranges)) for i, c in commands.items()]
-        answers = self._round_trip(frames, commands, self._parse)
-        return {motor_id: answers.get(motor_id) for motor_id in commands}
-
-    def _special(self, code: int) -> None:
-        frame = make_special(code)
-        self._round_trip(
-            [_frame(i, frame) for i in self.actuator_ids], self.actuator_ids, self._parse
-        )
 
     def enable(self) -> None:
         """Enable every motor (``FF…FC``)."""
