@@ -53,6 +53,14 @@ the interpreter; in simulated time that costs the robot nothing, and the
 map's timeouts (a few ms, for hardware) would count such replies as missed.
 """
 
+WALL_CLOCK_REPLY_TIMEOUT_S = 0.005
+"""Reply timeout of every bus on the wall clock, at least.
+
+The buses exchange at once, one thread each, and here the devices answer
+from threads of the same process, so they compete for the interpreter as
+real actuators never do; a map's 2 ms for 6 actuators is then too short.
+"""
+
 ODRIVE_PEAK_TORQUE_NM = 60.0
 """Torque an emulated ODrive's motor makes at most when the map gives no joint limit."""
 
@@ -121,10 +129,10 @@ class Emulation:
             self._servers.append(CanDeviceHost(host_bus, devices, reply_delay_s))
             self._stack.callback(host_bus.shutdown)
             self.bus_overrides[bus_name] = {"interface": "virtual", "channel": channel}
-        if not wall_clock:  # the robot's time stands still while this process is busy
-            for bus_name, spec in config.buses.items():
-                timeout_s = max(spec.reply_timeout_s, SIMULATED_REPLY_TIMEOUT_S)
-                self.bus_overrides[bus_name]["reply_timeout_s"] = timeout_s
+        least_s = WALL_CLOCK_REPLY_TIMEOUT_S if wall_clock else SIMULATED_REPLY_TIMEOUT_S
+        for bus_name, spec in config.buses.items():
+            timeout_s = max(spec.reply_timeout_s, least_s)
+            self.bus_overrides[bus_name]["reply_timeout_s"] = timeout_s
         backend = _backend(config)
         backend.reset(standing_state(welcome, {}))
         self.plant = Plant(

@@ -29,9 +29,10 @@ import logging
 import math
 import queue
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 import pinocchio as pin
@@ -56,6 +57,8 @@ from protocol.messages import Command
 __all__ = ["Bridge", "BridgeReport", "BridgeStartError", "JointLink", "LoopTiming", "Pacer"]
 
 log = logging.getLogger("poise.bridge")
+
+_T = TypeVar("_T")
 
 STATUS_PERIOD_S = 5.0
 """A status line (timing, link quality) is logged this often, at level INFO."""
@@ -247,6 +250,7 @@ class Bridge:
         self._held: Command | None = None
         self._enabled = False
         self._failed_buses: set[str] = set()
+        self._pool: ThreadPoolExecutor | None = None
 
     def _zero_commands(self) -> dict[str, dict[int, MotorCommand]]:
         return {
@@ -307,12 +311,14 @@ class Bridge:
 
     def shutdown(self) -> None:
         """Disable every actuator (best effort on each bus, one line per failure)."""
-        for name, bus in self.buses.items():
-            try:
-                bus.disable()
-            except BusError as exc:
-                log.error("could not disable the actuators of bus %r: %s", name, exc.detail)
+        results = self._on_every_bus(lambda name, bus: bus.disable())
+        for name, result in results.items():
+            if isinstance(result, BusError):
+                log.error("could not disable the actuators of bus %r: %s", name, result.detail)
         self._enabled = False
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
 
     # --- the loop ----------------------------------------------------------------
 
@@ -500,25 +506,54 @@ class Bridge:
             return None
         return command
 
+    def _on_every_bus(self, call: Callable[[str, ActuatorBus], _T]) -> dict[str, _T | BusError]:
+        """``call`` on every bus at once, one thread each: their waits for replies overlap.
+
+        Buses are separate wires: one after another, a tick would take the sum
+        of their exchanges (4 buses of 6 MIT actuators at 1 Mbit/s: 6.2 ms of
+        frames, against a 2 ms period at 500 Hz); together it takes the longest.
+        A bus that fails gives its :class:`BusError` instead of a result.
+        """
+        if len(self.buses) == 1:
+            name, bus = next(iter(self.buses.items()))
+            try:
+                return {name: call(name, bus)}
+            except BusError as exc:
+                return {name: exc}
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(len(self.buses), thread_name_prefix="bridge-bus")
+        futures = {name: self._pool.submit(call, name, bus) for name, bus in self.buses.items()}
+        results: dict[str, _T | BusError] = {}
+        for name, future in futures.items():
+            try:
+                results[name] = future.result()
+            except BusError as exc:
+                results[name] = exc
+        return results
+
     def _exchange(
         self, commands: Mapping[str, Mapping[int, MotorCommand]]
     ) -> list[MotorFeedback | None]:
-        feedback = {name: bus.exchange(commands[name]) for name, bus in self.buses.items()}
-        replies = self.joint_map.gather(feedback)
+        """Exchange on every bus; a failed bus raises its :class:`BusError` (after all ran)."""
+        results = self._on_every_bus(lambda name, bus: bus.exchange(commands[name]))
+        failed = [result for result in results.values() if isinstance(result, BusError)]
+        if failed:
+            raise failed[0]
+        replies = self.joint_map.gather(results)  # type: ignore[arg-type]
         for link, reply in zip(self.report.links, replies, strict=True):
             link.add(reply)
         return replies
 
     def _hold_safe(self) -> None:
         """Command the safe state on every bus; a failing bus does not stop the others."""
+        results = self._on_every_bus(lambda name, bus: bus.hold_safe(self._damping[name]))
         feedback: dict[str, dict[int, MotorFeedback | None]] = {}
-        for name, bus in self.buses.items():
-            try:
-                feedback[name] = bus.hold_safe(self._damping[name])
-            except BusError as exc:
-                if name not in self._failed_buses:
-                    log.error("cannot command the safe state on bus %r: %s", name, exc.detail)
-                    self._failed_buses.add(name)
+        for name, result in results.items():
+            if not isinstance(result, BusError):
+                feedback[name] = result
+            elif name not in self._failed_buses:
+                log.error("cannot command the safe state on bus %r: %s", name, result.detail)
+                self._failed_buses.add(name)
         replies = self.joint_map.gather(feedback)
         for link, reply in zip(self.report.links, replies, strict=True):
             link.add(reply)
