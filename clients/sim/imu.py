@@ -345,6 +345,16 @@ class SimulatedImu:
             else np.asarray(gravity_in_world_m_per_s2, dtype=float).reshape(3)
         )
         self.period_s = 1.0 / spec.rate_hz
+        self._noise_std = np.repeat(
+            [spec.gyro_noise_std_rad_per_s, spec.accel_noise_std_m_per_s2], 3
+        )
+        self._walk_density = np.repeat(
+            [
+                spec.gyro_bias_random_walk_rad_per_s2_sqrt_hz,
+                spec.accel_bias_random_walk_m_per_s3_sqrt_hz,
+            ],
+            3,
+        )
         self._started = False
         self._reading: ImuReading | None = None
 
@@ -486,21 +496,18 @@ class SimulatedImu:
 
     def _sample(self) -> ImuReading:
         """Average the window, add noise and bias, walk the biases; start a new window."""
-        spec, rng = self.spec, self._rng
         window_s = self._window_s
         true_angular = self._angular_sum / window_s
         true_specific_force = self._specific_force_sum / window_s
         gyro_bias, accel_bias = self._gyro_bias.copy(), self._accel_bias.copy()
-        # Fixed draw order (gyro noise, accel noise, gyro walk, accel walk): same seed, same run.
-        gyro_noise = spec.gyro_noise_std_rad_per_s * rng.standard_normal(3)
-        accel_noise = spec.accel_noise_std_m_per_s2 * rng.standard_normal(3)
-        walk = math.sqrt(window_s)
-        self._gyro_bias += (
-            spec.gyro_bias_random_walk_rad_per_s2_sqrt_hz * walk * rng.standard_normal(3)
-        )
-        self._accel_bias += (
-            spec.accel_bias_random_walk_m_per_s3_sqrt_hz * walk * rng.standard_normal(3)
-        )
+        # One draw per sample, in a fixed order (gyro noise, accel noise, gyro
+        # walk, accel walk): the same seed gives the same run.
+        draws = self._rng.standard_normal(12)
+        draws[:6] *= self._noise_std
+        draws[6:] *= self._walk_density * math.sqrt(window_s)
+        self._gyro_bias += draws[6:9]
+        self._accel_bias += draws[9:]
+        gyro_noise, accel_noise = draws[:3], draws[3:6]
         self._window_s = 0.0
         self._angular_sum = np.zeros(3)
         self._specific_force_sum = np.zeros(3)
