@@ -1,0 +1,125 @@
+"""SO(3) and SE_{2+K}(3) helpers for the contact-aided invariant EKF.
+
+An element of SE_{2+K}(3) (Hartley et al. 2020, "Contact-aided invariant extended Kalman
+filtering for robot state estimation", IJRR, Sec. 3 "the state as a matrix Lie group";
+arXiv:1904.09251) is a rotation ``R`` with ``2 + K`` vectors ``x_i`` (velocity, position,
+K contact positions), the matrix ``[[R, x_1 … x_{2+K}], [0, I]]``. Its tangent vector is
+``ξ = [ξ_R, ξ_1, …, ξ_{2+K}]`` (3 + 3(2 + K) numbers) and
+
+* ``exp(ξ) = (Γ₀(ξ_R), Γ₁(ξ_R) ξ_1, …, Γ₁(ξ_R) ξ_{2+K})``,
+* ``Ad_X = [[R, 0 …], [[x_i]× R, … R …]]`` (block lower triangular),
+
+with ``Γ_m(φ) = Σ_n (φ×)ⁿ / (n + m)!`` the series of Hartley et al. 2020, Appendix
+("Γ functions"): ``Γ₀`` is the SO(3) exponential, ``Γ₁`` its left Jacobian.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["sek3_adjoint", "sek3_exp", "skew", "so3_exp", "so3_gamma", "so3_log"]
+
+_SMALL_ANGLE = 1e-4
+"""Below this angle (rad) the Γ coefficients use their Taylor series (error < 1e-17)."""
+
+
+def skew(vector: np.ndarray) -> np.ndarray:
+    """The matrix ``[v]×`` with ``[v]× w = v × w``."""
+    x, y, z = vector
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def so3_gamma(phi: np.ndarray, order: int) -> np.ndarray:
+    """``Γ_m(φ) = Σ_{n≥0} (φ×)ⁿ / (n + m)!`` for ``m`` in 0, 1, 2 (Hartley et al. 2020, App.).
+
+    Closed forms with ``θ = |φ|``:
+    ``Γ₀ = I + sin θ/θ φ× + (1 − cos θ)/θ² φ×²``,
+    ``Γ₁ = I + (1 − cos θ)/θ² φ× + (θ − sin θ)/θ³ φ×²``,
+    ``Γ₂ = ½ I + (θ − sin θ)/θ³ φ× + (θ² + 2 cos θ − 2)/(2 θ⁴) φ×²``.
+
+    Args:
+        phi: Rotation vector (rad), ``(3,)``.
+        order: ``m``, 0, 1 or 2.
+
+    Returns:
+        The ``(3, 3)`` matrix.
+    """
+    theta = float(np.linalg.norm(phi))
+    phi_x = skew(phi)
+    phi_x2 = phi_x @ phi_x
+    t2 = theta * theta
+    small = theta < _SMALL_ANGLE
+    if order == 0:
+        a = 1.0 - t2 / 6.0 if small else np.sin(theta) / theta
+        b = 0.5 - t2 / 24.0 if small else (1.0 - np.cos(theta)) / t2
+        return np.eye(3) + a * phi_x + b * phi_x2
+    if order == 1:
+        a = 0.5 - t2 / 24.0 if small else (1.0 - np.cos(theta)) / t2
+        b = 1.0 / 6.0 - t2 / 120.0 if small else (theta - np.sin(theta)) / (t2 * theta)
+        return np.eye(3) + a * phi_x + b * phi_x2
+    if order == 2:
+        a = 1.0 / 6.0 - t2 / 120.0 if small else (theta - np.sin(theta)) / (t2 * theta)
+        b = 1.0 / 24.0 - t2 / 720.0 if small else (t2 + 2.0 * np.cos(theta) - 2.0) / (2.0 * t2 * t2)
+        return 0.5 * np.eye(3) + a * phi_x + b * phi_x2
+    raise ValueError(f"Γ is implemented for orders 0, 1, 2, got {order=}")
+
+
+def so3_exp(phi: np.ndarray) -> np.ndarray:
+    """The rotation ``exp([φ]×)`` (Rodrigues), ``Γ₀(φ)``."""
+    return so3_gamma(phi, 0)
+
+
+def so3_log(rotation: np.ndarray) -> np.ndarray:
+    """The rotation vector ``φ`` (rad, ``|φ| ≤ π``) with ``exp([φ]×) = rotation``."""
+    cos_theta = np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0)
+    theta = float(np.arccos(cos_theta))
+    axis_sin = 0.5 * np.array(
+        [
+            rotation[2, 1] - rotation[1, 2],
+            rotation[0, 2] - rotation[2, 0],
+            rotation[1, 0] - rotation[0, 1],
+        ]
+    )
+    if theta < _SMALL_ANGLE:
+        return axis_sin * (1.0 + theta * theta / 6.0)
+    if np.pi - theta < 1e-6:
+        # sin θ ≈ 0: the axis is the dominant column of (R + I) / 2 = a aᵀ.
+        outer = (rotation + np.eye(3)) / 2.0
+        axis = outer[:, int(np.argmax(np.diag(outer)))]
+        return theta * axis / np.linalg.norm(axis)
+    return theta / np.sin(theta) * axis_sin
+
+
+def sek3_exp(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exponential of SE_{2+K}(3) (Hartley et al. 2020, Sec. 3, exp of the Lie algebra).
+
+    Args:
+        xi: Tangent vector ``[ξ_R, ξ_1, …, ξ_N]``, ``(3 + 3N,)``.
+
+    Returns:
+        ``(R, columns)``: ``Γ₀(ξ_R)`` and the ``(N, 3)`` vectors ``Γ₁(ξ_R) ξ_i``.
+    """
+    xi_rotation = xi[:3]
+    left_jacobian = so3_gamma(xi_rotation, 1)
+    columns = xi[3:].reshape(-1, 3) @ left_jacobian.T
+    return so3_gamma(xi_rotation, 0), columns
+
+
+def sek3_adjoint(rotation: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Adjoint matrix of ``X = (R, x_1 … x_N)`` (Hartley et al. 2020, Sec. 3).
+
+    ``Ad_X = [[R, 0, …, 0], [[x_1]× R, R, …], …, [[x_N]× R, 0, …, R]]``, so that
+    ``X exp(ξ) X⁻¹ = exp(Ad_X ξ)``.
+
+    Args:
+        rotation: ``R``, ``(3, 3)``.
+        columns: ``(N, 3)`` vectors ``x_i``.
+
+    Returns:
+        The ``(3 + 3N, 3 + 3N)`` matrix.
+    """
+    count = len(columns)
+    adjoint = np.kron(np.eye(count + 1), rotation)
+    for i, column in enumerate(columns):
+        adjoint[3 + 3 * i : 6 + 3 * i, :3] = skew(column) @ rotation
+    return adjoint
