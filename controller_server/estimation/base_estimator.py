@@ -61,8 +61,14 @@ from controller_server.estimation.estimate import (
     checked_array,
     level_rotation,
 )
+from controller_server.estimation.inekf import (
+    error_dynamics_matrix,
+    error_transition_matrix,
+    kinematic_innovation,
+    propagate_mean,
+)
 from controller_server.estimation.leg_kinematics import LegKinematics
-from controller_server.estimation.lie import sek3_adjoint, sek3_exp, skew, so3_gamma
+from controller_server.estimation.lie import sek3_exp, skew
 
 __all__ = ["BaseEstimator"]
 
@@ -240,42 +246,20 @@ class BaseEstimator:
         omega = gyro - self._bias[:3]
         accel = accel - self._bias[3:]
         self._angular_velocity_imu = omega
-        rotation, gravity = self._rotation, self._gravity
-        velocity, position = self._columns[0], self._columns[1]
-        dim = len(self._covariance)
-        # Error dynamics ξ̇ = A ξ + G w, at the estimate before the step.
-        a_matrix = np.zeros((dim, dim))
-        a_matrix[3:6, 0:3] = skew(gravity)
-        a_matrix[6:9, 3:6] = np.eye(3)
-        group = np.r_[0:9, 15:dim]
-        adjoint = sek3_adjoint(rotation, self._columns)
-        a_matrix[group, 9:12] = -adjoint[:, 0:3]
-        a_matrix[3:6, 12:15] = -rotation
-        a_dt = a_matrix * dt
-        a_dt2 = a_dt @ a_dt
-        phi = np.eye(dim) + a_dt + a_dt2 / 2.0 + a_dt2 @ a_dt / 6.0
+        a_matrix, g_matrix = error_dynamics_matrix(self._rotation, self._columns, self._gravity)
+        phi = error_transition_matrix(a_matrix, dt)
         noise = self.noise
-        q_group = np.zeros(dim - 6)
-        q_group[0:3] = noise.gyro_noise_density**2
-        q_group[3:6] = noise.accel_noise_density**2
-        q_group[9:] = noise.contact_slip_random_walk**2
-        g_matrix = np.zeros((dim, dim))
-        g_matrix[np.ix_(group, group)] = adjoint
-        g_matrix[9:15, 9:15] = np.eye(6)
+        dim = len(self._covariance)
         q_diag = np.zeros(dim)
-        q_diag[group] = q_group
+        q_diag[0:3] = noise.gyro_noise_density**2
+        q_diag[3:6] = noise.accel_noise_density**2
         q_diag[9:12] = noise.gyro_bias_random_walk**2
         q_diag[12:15] = noise.accel_bias_random_walk**2
+        q_diag[15:] = noise.contact_slip_random_walk**2
         phi_g = phi @ g_matrix
         self._covariance = phi @ self._covariance @ phi.T + (phi_g * q_diag) @ phi_g.T * dt
-        # Mean, exact for constant inputs over dt.
-        phi_rotation = omega * dt
-        self._rotation = rotation @ so3_gamma(phi_rotation, 0)
-        self._columns[0] = velocity + (rotation @ so3_gamma(phi_rotation, 1) @ accel + gravity) * dt
-        self._columns[1] = (
-            position
-            + velocity * dt
-            + (rotation @ so3_gamma(phi_rotation, 2) @ accel + 0.5 * gravity) * dt * dt
+        self._rotation, self._columns = propagate_mean(
+            self._rotation, self._columns, omega, accel, self._gravity, dt
         )
 
     # -- correction ----------------------------------------------------------------------
@@ -312,14 +296,13 @@ class BaseEstimator:
         h_matrix = np.zeros((3 * count, dim))
         innovation = np.zeros(3 * count)
         noise = np.zeros((3 * count, 3 * count))
-        rotation, position = self._rotation, self._columns[1]
         for i, k in enumerate(self._stance):
             rows = slice(3 * i, 3 * i + 3)
             y, covariance = measured[k]
-            h_matrix[rows, 6:9] = -np.eye(3)
-            h_matrix[rows, 15 + 3 * i : 18 + 3 * i] = np.eye(3)
-            innovation[rows] = rotation @ y - (self._columns[2 + i] - position)
-            noise[rows, rows] = rotation @ covariance @ rotation.T
+            innovation[rows], h_matrix[rows] = kinematic_innovation(
+                self._rotation, self._columns, i, y
+            )
+            noise[rows, rows] = self._rotation @ covariance @ self._rotation.T
         p_ht = self._covariance @ h_matrix.T
         innovation_covariance = h_matrix @ p_ht + noise
         gain = np.linalg.solve(innovation_covariance, p_ht.T).T

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["sek3_adjoint", "sek3_exp", "skew", "so3_exp", "so3_gamma", "so3_log"]
+__all__ = ["sek3_adjoint", "sek3_exp", "sek3_log", "skew", "so3_exp", "so3_gamma", "so3_log"]
 
 _SMALL_ANGLE = 1e-4
 """Below this angle (rad) the Γ coefficients use their Taylor series (error < 1e-17)."""
@@ -123,3 +123,10 @@ def sek3_adjoint(rotation: np.ndarray, columns: np.ndarray) -> np.ndarray:
     for i, column in enumerate(columns):
         adjoint[3 + 3 * i : 6 + 3 * i, :3] = skew(column) @ rotation
     return adjoint
+
+
+def sek3_log(rotation: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`sek3_exp`: ``[φ, Γ₁(φ)⁻¹ x_1, …]`` with ``φ = log R``."""
+    phi = so3_log(rotation)
+    left_jacobian = so3_gamma(phi, 1)
+    return np.concatenate([phi, np.linalg.solve(left_jacobian, np.asarray(columns).T).T.ravel()])
