@@ -246,7 +246,10 @@ class BaseEstimator:
         omega = gyro - self._bias[:3]
         accel = accel - self._bias[3:]
         self._angular_velocity_imu = omega
-        a_matrix, g_matrix = error_dynamics_matrix(self._rotation, self._columns, self._gravity)
+        # A and G at the mid-step state: the bias columns then match the exact transition
+        # to O(dt³) (A itself changes with the state over the step).
+        middle = propagate_mean(self._rotation, self._columns, omega, accel, self._gravity, dt / 2)
+        a_matrix, g_matrix = error_dynamics_matrix(*middle, self._gravity)
         phi = error_transition_matrix(a_matrix, dt)
         noise = self.noise
         dim = len(self._covariance)
