@@ -26,7 +26,7 @@ Error ``η = X̂ X⁻¹ ≈ exp(ξ)`` (right-invariant), ``ζ = b̂ − b``; cov
   ``y_k = R_WIᵀ (d_k − p)`` measured as ``R_BIᵀ (s_k(α) − r_BI)`` from the encoders;
   innovation ``z_k = R̂ y_k − (d̂_k − p̂)``, ``H_k = [0, 0, −I, 0, 0, …, I, …]``, noise
   ``R̂ R_BIᵀ (J Σ_α Jᵀ + σ_s² I) R_BI R̂ᵀ``; ``X̂⁺ = exp(δ_ξ) X̂``, ``b̂⁺ = b̂ + δ_ζ``,
-  ``δ = K z``, Joseph-form covariance.
+  ``δ = K z``, covariance ``P − K H P``.
 * Contacts (paper Sec. 7): a contact entering stance is augmented with
   ``d̂_k = p̂ + R̂ y_k``, whose error ``ξ_dk = ξ_p + R̂ n`` copies the ``ξ_p`` rows of the
   covariance; one leaving stance is marginalised (its rows and columns dropped).
@@ -279,7 +279,8 @@ class BaseEstimator:
         positions, jacobians, flags = self._check_kinematics(kinematics, contact_flags)
         self._require_initialized()
         kept = [i for i, k in enumerate(self._stance) if flags[k]]
-        self._keep_contacts(kept)
+        if len(kept) < len(self._stance):
+            self._keep_contacts(kept)
         measured = [self._measurement_in_imu(positions[k], jacobians[k]) for k in range(len(flags))]
         if self._stance:
             self._update(measured)
@@ -314,8 +315,8 @@ class BaseEstimator:
         self._rotation = rotation_step @ self._rotation
         self._columns = self._columns @ rotation_step.T + column_step
         self._bias = self._bias + delta[9:15]
-        i_kh = np.eye(dim) - gain @ h_matrix
-        covariance = i_kh @ self._covariance @ i_kh.T + gain @ noise @ gain.T
+        # P − K S Kᵀ = P − K H P with the optimal gain; symmetrised against round-off.
+        covariance = self._covariance - gain @ p_ht.T
         self._covariance = 0.5 * (covariance + covariance.T)
 
     def _add_contact(self, contact: int, y: np.ndarray, covariance: np.ndarray) -> None:
@@ -353,7 +354,7 @@ class BaseEstimator:
                 - self._bias[:3]
             )
         else:
-            self._check_kinematics(kinematics, contact_flags)
+            self._check_kinematics(kinematics, contact_flags)  # before changing anything
             self.propagate(angular_velocity_imu_in_imu, specific_force_imu_in_imu, dt)
             self.correct(kinematics, contact_flags)
         return self.estimate()

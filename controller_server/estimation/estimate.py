@@ -73,7 +73,7 @@ class EstimatorNoise:
     accel_bias_random_walk: float = 1e-3
     joint_position_noise: float = 1e-3
     contact_position_noise: float = 2e-3
-    contact_slip_random_walk: float = 1e-2
+    contact_slip_random_walk: float = 3e-3
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller_server.estimation.lie import sek3_adjoint, skew, so3_gamma
+from controller_server.estimation.lie import sek3_adjoint, skew, so3_gammas
 
 __all__ = [
     "error_dynamics_matrix",
@@ -46,16 +46,14 @@ def propagate_mean(
     Returns:
         ``(R⁺, columns⁺)``.
     """
-    phi = angular_velocity * dt
+    gamma0, gamma1, gamma2 = so3_gammas(angular_velocity * dt)
     velocity, position = columns[0], columns[1]
     new_columns = columns.copy()
-    new_columns[0] = velocity + (rotation @ so3_gamma(phi, 1) @ acceleration + gravity) * dt
+    new_columns[0] = velocity + (rotation @ (gamma1 @ acceleration) + gravity) * dt
     new_columns[1] = (
-        position
-        + velocity * dt
-        + (rotation @ so3_gamma(phi, 2) @ acceleration + gravity / 2) * dt**2
+        position + velocity * dt + (rotation @ (gamma2 @ acceleration) + gravity / 2) * dt**2
     )
-    return rotation @ so3_gamma(phi, 0), new_columns
+    return rotation @ gamma0, new_columns
 
 
 def error_dynamics_matrix(
@@ -71,15 +69,18 @@ def error_dynamics_matrix(
         ``(A, G)``, both ``(15 + 3K, 15 + 3K)``.
     """
     dim = 9 + 3 * len(columns)
-    group = np.r_[0:9, 15:dim]
     adjoint = sek3_adjoint(rotation, columns)
     a_matrix = np.zeros((dim, dim))
     a_matrix[3:6, 0:3] = skew(gravity)
     a_matrix[6:9, 3:6] = np.eye(3)
-    a_matrix[group, 9:12] = -adjoint[:, 0:3]
+    a_matrix[0:9, 9:12] = -adjoint[0:9, 0:3]
+    a_matrix[15:, 9:12] = -adjoint[9:, 0:3]
     a_matrix[3:6, 12:15] = -rotation
+    # G = blkdiag(Ad_X, I₆) with the group blocks around the bias slot (Ad_X[:9, 9:] = 0).
     g_matrix = np.zeros((dim, dim))
-    g_matrix[np.ix_(group, group)] = adjoint
+    g_matrix[0:9, 0:9] = adjoint[0:9, 0:9]
+    g_matrix[15:, 0:9] = adjoint[9:, 0:9]
+    g_matrix[15:, 15:] = adjoint[9:, 9:]
     g_matrix[9:15, 9:15] = np.eye(6)
     return a_matrix, g_matrix
 

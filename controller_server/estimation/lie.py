@@ -19,19 +19,49 @@ import math
 
 import numpy as np
 
-__all__ = ["sek3_adjoint", "sek3_exp", "sek3_log", "skew", "so3_exp", "so3_gamma", "so3_log"]
+__all__ = [
+    "sek3_adjoint",
+    "sek3_exp",
+    "sek3_log",
+    "skew",
+    "so3_exp",
+    "so3_gamma",
+    "so3_gammas",
+    "so3_log",
+]
 
 _SMALL_ANGLE = 0.1
 """Below this angle (rad) the Γ coefficients use their Taylor series (5 terms: error < 1e-17)."""
 
 
+_SERIES = [[(-1) ** n / math.factorial(2 * n + k) for n in range(5)] for k in range(5)]
+"""Coefficients of ``c_k(θ) = Σ_n (−θ²)ⁿ / (2n + k)!``, five terms."""
+_IDENTITY = np.eye(3)
+_IDENTITY.setflags(write=False)
+
+
 def _even_series(theta_squared: float, first: int) -> float:
-    """``Σ_{n=0}^{4} (−θ²)ⁿ / (2n + first)!``."""
-    total, term = 0.0, 1.0 / math.factorial(first)
-    for n in range(5):
-        total += term
-        term *= -theta_squared / ((2 * n + first + 1) * (2 * n + first + 2))
-    return total
+    """``c_first(θ) = Σ_{n=0}^{4} (−θ²)ⁿ / (2n + first)!`` (Horner)."""
+    a0, a1, a2, a3, a4 = _SERIES[first]
+    t2 = theta_squared
+    return a0 + t2 * (a1 + t2 * (a2 + t2 * (a3 + t2 * a4)))
+
+
+def _gamma_coefficients(phi: np.ndarray) -> tuple[float, float, float, float]:
+    """``c_1 … c_4`` of the Γ series: ``Γ_m = I/m! + c_{m+1} φ× + c_{m+2} φ×²``."""
+    x, y, z = phi
+    t2 = float(x * x + y * y + z * z)
+    if t2 < _SMALL_ANGLE * _SMALL_ANGLE:
+        # The closed forms cancel catastrophically at small angles.
+        return tuple(_even_series(t2, k) for k in (1, 2, 3, 4))
+    theta = math.sqrt(t2)
+    sin, cos = math.sin(theta), math.cos(theta)
+    return (
+        sin / theta,
+        (1.0 - cos) / t2,
+        (theta - sin) / (t2 * theta),
+        (t2 + 2.0 * cos - 2.0) / (2.0 * t2 * t2),
+    )
 
 
 def skew(vector: np.ndarray) -> np.ndarray:
@@ -55,26 +85,28 @@ def so3_gamma(phi: np.ndarray, order: int) -> np.ndarray:
     Returns:
         The ``(3, 3)`` matrix.
     """
-    theta = float(np.linalg.norm(phi))
+    c1, c2, c3, c4 = _gamma_coefficients(phi)
     phi_x = skew(phi)
     phi_x2 = phi_x @ phi_x
-    t2 = theta * theta
-    if theta < _SMALL_ANGLE:
-        # c_k(θ) = Σ_n (−θ²)ⁿ / (2n + k)!: the closed forms below cancel catastrophically.
-        c1, c2, c3, c4 = (_even_series(t2, k) for k in (1, 2, 3, 4))
-    else:
-        sin, cos = np.sin(theta), np.cos(theta)
-        c1 = sin / theta
-        c2 = (1.0 - cos) / t2
-        c3 = (theta - sin) / (t2 * theta)
-        c4 = (t2 + 2.0 * cos - 2.0) / (2.0 * t2 * t2)
     if order == 0:
-        return np.eye(3) + c1 * phi_x + c2 * phi_x2
+        return _IDENTITY + c1 * phi_x + c2 * phi_x2
     if order == 1:
-        return np.eye(3) + c2 * phi_x + c3 * phi_x2
+        return _IDENTITY + c2 * phi_x + c3 * phi_x2
     if order == 2:
-        return 0.5 * np.eye(3) + c3 * phi_x + c4 * phi_x2
+        return 0.5 * _IDENTITY + c3 * phi_x + c4 * phi_x2
     raise ValueError(f"Γ is implemented for orders 0, 1, 2, got {order=}")
+
+
+def so3_gammas(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(Γ₀(φ), Γ₁(φ), Γ₂(φ))`` at once (see :func:`so3_gamma`)."""
+    c1, c2, c3, c4 = _gamma_coefficients(phi)
+    phi_x = skew(phi)
+    phi_x2 = phi_x @ phi_x
+    return (
+        _IDENTITY + c1 * phi_x + c2 * phi_x2,
+        _IDENTITY + c2 * phi_x + c3 * phi_x2,
+        0.5 * _IDENTITY + c3 * phi_x + c4 * phi_x2,
+    )
 
 
 def so3_exp(phi: np.ndarray) -> np.ndarray:
@@ -131,10 +163,13 @@ def sek3_adjoint(rotation: np.ndarray, columns: np.ndarray) -> np.ndarray:
     Returns:
         The ``(3 + 3N, 3 + 3N)`` matrix.
     """
-    count = len(columns)
-    adjoint = np.kron(np.eye(count + 1), rotation)
+    dim = 3 + 3 * len(columns)
+    adjoint = np.zeros((dim, dim))
+    adjoint[:3, :3] = rotation
     for i, column in enumerate(columns):
-        adjoint[3 + 3 * i : 6 + 3 * i, :3] = skew(column) @ rotation
+        rows = slice(3 + 3 * i, 6 + 3 * i)
+        adjoint[rows, :3] = skew(column) @ rotation
+        adjoint[rows, rows] = rotation
     return adjoint
 
 

@@ -58,6 +58,13 @@ def _rz(angle):
     return so3_exp(np.array([0.0, 0.0, angle]))
 
 
+def _cross(a, b):
+    """``a × b`` (``np.cross`` costs ten times more on 3-vectors)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
+
+
 def _sine(amplitude, frequency_hz, phase, t):
     """Value, first and second derivative of ``A sin(2π f t + c)``."""
     w = 2 * np.pi * frequency_hz
@@ -87,26 +94,24 @@ def base_motion(t: float):
     omega_dot = (
         yaw[2] * e_z
         + pitch[2] * axis_pitch
-        + pitch[1] * np.cross(yaw[1] * e_z, axis_pitch)
+        + pitch[1] * _cross(yaw[1] * e_z, axis_pitch)
         + roll[2] * axis_roll
-        + roll[1] * np.cross(omega_zy, axis_roll)
+        + roll[1] * _cross(omega_zy, axis_roll)
     )
     return rz @ ry @ rx, position, velocity, acceleration, omega, omega_dot
 
 
-def exact_imu(t: float, mount: ImuMount = MOUNT):
+def exact_imu(t: float, mount: ImuMount = MOUNT, truth=None):
     """Gyro and specific force of a perfect IMU at ``t`` (IMU frame)."""
-    rotation, _, _, acceleration, omega, omega_dot = base_motion(t)
+    rotation, _, _, acceleration, omega, omega_dot = truth or base_motion(t)
     lever = rotation @ mount.position_imu_in_base
-    acceleration_imu = (
-        acceleration + np.cross(omega_dot, lever) + np.cross(omega, np.cross(omega, lever))
-    )
+    acceleration_imu = acceleration + _cross(omega_dot, lever) + _cross(omega, _cross(omega, lever))
     rotation_imu = rotation @ mount.rotation_imu_to_base
     return rotation_imu.T @ omega, rotation_imu.T @ (acceleration_imu - GRAVITY)
 
 
-def feet_in_base(t: float, feet_in_world=FEET_IN_WORLD):
-    rotation, position, *_ = base_motion(t)
+def feet_in_base(t: float, feet_in_world=FEET_IN_WORLD, truth=None):
+    rotation, position, *_ = truth or base_motion(t)
     return (feet_in_world - position) @ rotation
 
 
@@ -117,8 +122,8 @@ class NoisyImu:
         self.rng, self.noise = rng, noise
         self.gyro_bias, self.accel_bias = np.array(gyro_bias), np.array(accel_bias)
 
-    def read(self, t, dt):
-        gyro, accel = exact_imu(t)
+    def read(self, t, dt, truth=None):
+        gyro, accel = exact_imu(t, truth=truth)
         n = self.noise
         self.gyro_bias = self.gyro_bias + n.gyro_bias_random_walk * np.sqrt(
             dt
@@ -145,9 +150,9 @@ def noisy_kinematics(rng, positions, noise: EstimatorNoise) -> LegKinematics:
     return LegKinematics(measured, np.repeat(LEG_JACOBIAN[None], count, axis=0))
 
 
-def errors(estimate, t):
-    """Tilt (rad), yaw (rad), velocity (m/s, vector) and height (m) errors at ``t``."""
-    rotation, position, velocity, *_ = base_motion(t)
+def errors(estimate, truth):
+    """Tilt (rad), yaw (rad), velocity (m/s, vector) and height (m) errors against ``truth``."""
+    rotation, position, velocity, *_ = truth
     rotation_est = pin.Quaternion(estimate.orientation_base_in_world_xyzw).toRotationMatrix()
     up_true, up_est = rotation.T @ np.array([0, 0, 1.0]), rotation_est.T @ np.array([0, 0, 1.0])
     tilt = np.arccos(np.clip(up_true @ up_est, -1.0, 1.0))
@@ -170,11 +175,12 @@ def run(duration_s, seed, *, flags_at=lambda t: (True, True), feet_at=None):
     history = []
     for i in range(int(duration_s * RATE_HZ) + 1):
         t = i * dt
-        gyro, accel = imu.read(t, dt)
+        truth = base_motion(t)
+        gyro, accel = imu.read(t, dt, truth)
         feet_world = FEET_IN_WORLD if feet_at is None else feet_at(t)
-        kinematics = noisy_kinematics(rng, feet_in_base(t, feet_world), noise)
+        kinematics = noisy_kinematics(rng, feet_in_base(t, feet_world, truth), noise)
         estimate = estimator.step(gyro, accel, dt, kinematics, flags_at(t))
-        history.append((t, *errors(estimate, t)))
+        history.append((t, *errors(estimate, truth)))
     return estimator, estimate, imu, history
 
 
@@ -224,7 +230,7 @@ def test_tracks_roll_pitch_velocity_height_and_biases_over_ten_seconds():
     assert height_max <= 0.01
     assert yaw_drift <= 1.0
     assert np.linalg.norm(gyro_bias_error) < 0.2 * np.linalg.norm(imu.gyro_bias)
-    assert np.linalg.norm(accel_bias_error) < 0.5 * np.linalg.norm(imu.accel_bias)
+    assert np.linalg.norm(accel_bias_error) < 0.3 * np.linalg.norm(imu.accel_bias)
     assert set(estimate.position_contacts_in_world) == {"left", "right"}
     np.testing.assert_allclose(
         estimate.position_contacts_in_world["right"][2], FEET_IN_WORLD[1, 2], atol=0.01
