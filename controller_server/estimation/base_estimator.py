@@ -7,7 +7,10 @@ one matrix Lie group SE_{2+K}(3). Without biases its linearised error dynamics a
 measurement Jacobian do not depend on the estimate, so a wrong initial yaw or position
 does not corrupt the gains and the covariance keeps the true unobservable directions; a
 quaternion EKF in the style of Bloesch et al. (RSS 2012) linearises about the estimate and
-can become overconfident in yaw. Biases follow the paper's "imperfect InEKF" (Sec. 6).
+can become overconfident in yaw. IMU biases are appended outside the group as in the
+paper's bias-augmented ("imperfect") InEKF, which gives up that independence only in the
+bias columns. Section topics are cited, not numbers: the equations below were re-derived
+and are checked by finite differences in the tests.
 
 State (world frame W, IMU frame I; the filter runs at the IMU, where the propagation is
 exact): ``X = (R, v, p, d_1 … d_K)`` with ``R = R_WI``, ``v``, ``p`` the IMU point's velocity
@@ -15,29 +18,33 @@ and position in W, ``d_k`` the stance contact points in W; biases ``b_g``, ``b_a
 Error ``η = X̂ X⁻¹ ≈ exp(ξ)`` (right-invariant), ``ζ = b̂ − b``; covariance order
 ``[ξ_R, ξ_v, ξ_p, ζ_g, ζ_a, ξ_d1 … ξ_dK]``.
 
-* Propagation (paper Sec. 4; mean integrated exactly for inputs constant over ``dt``):
+* Propagation (paper: IMU propagation; mean integrated exactly for constant inputs):
   ``R⁺ = R Γ₀(ω dt)``, ``v⁺ = v + (R Γ₁(ω dt) a + g) dt``,
   ``p⁺ = p + v dt + (R Γ₂(ω dt) a + g/2) dt²`` with ``ω = ω̃ − b̂_g``, ``a = ã − b̂_a``;
   ``ξ̇ = A ξ + [Ad_X̂ w; w_b]``, ``A`` with ``∂ξ̇_v/∂ξ_R = [g]×``, ``∂ξ̇_p/∂ξ_v = I`` and the
   bias columns ``−Ad_X̂`` (rows ``−R``, ``−[v]× R``, ``−[p]× R``, ``−[d_k]× R`` for ``ζ_g``;
-  ``−R`` in the ``ξ_v`` row for ``ζ_a``). ``A`` is nilpotent (``A⁴ = 0``), so
-  ``Φ = I + A dt + (A dt)²/2 + (A dt)³/6`` is its exact exponential; ``Q_d = Φ G Q Gᵀ Φᵀ dt``.
-* Leg kinematics (paper Sec. 5, right-invariant observation ``Y = X⁻¹ b``):
+  ``−R`` in the ``ξ_v`` row for ``ζ_a``), evaluated at the mid-step state. ``A`` is
+  nilpotent (``A⁴ = 0``), so ``Φ = I + A dt + (A dt)²/2 + (A dt)³/6`` is its exact
+  exponential; ``Q_d = Φ G Q Gᵀ Φᵀ dt``.
+* Leg kinematics (paper: forward-kinematic correction, right-invariant ``Y = X⁻¹ b``):
   ``y_k = R_WIᵀ (d_k − p)`` measured as ``R_BIᵀ (s_k(α) − r_BI)`` from the encoders;
   innovation ``z_k = R̂ y_k − (d̂_k − p̂)``, ``H_k = [0, 0, −I, 0, 0, …, I, …]``, noise
   ``R̂ R_BIᵀ (J Σ_α Jᵀ + σ_s² I) R_BI R̂ᵀ``; ``X̂⁺ = exp(δ_ξ) X̂``, ``b̂⁺ = b̂ + δ_ζ``,
   ``δ = K z``, covariance ``P − K H P``.
-* Contacts (paper Sec. 7): a contact entering stance is augmented with
+* Contacts (paper: adding and removing contacts): a contact entering stance is augmented with
   ``d̂_k = p̂ + R̂ y_k``, whose error ``ξ_dk = ξ_p + R̂ n`` copies the ``ξ_p`` rows of the
   covariance; one leaving stance is marginalised (its rows and columns dropped).
 
-Observability (paper Sec. 5.3; Bloesch et al. 2012, Sec. IV): with a stance contact, roll,
-pitch, velocity, the height above the stance feet, the gyro bias and (when the body rotates)
-the accelerometer bias are observable. Yaw and horizontal position are not: they drift as a
-random walk driven by the gyro noise and the residual bias about the vertical (yaw error
-grows about ``σ_g √t``, 0.04° over 10 s with the BMI088 defaults) and by foot slip; nothing
-here bounds them without an external heading or position, and the covariance shows their
-growth. Output heights are relative to the ground the feet stood on at initialisation.
+Observability (Hartley et al. 2018/2020; Bloesch et al. 2012): with a stance contact,
+roll, pitch, velocity, the height above the stance feet and the gyro bias are observable,
+and the accelerometer bias when the body rotates (a horizontal accelerometer bias is
+otherwise indistinguishable from tilt: 0.1 m/s² is 0.6°). Yaw and horizontal position are
+not: they drift as a random walk driven by the gyro noise, the not-yet-converged gyro bias
+about the vertical and the foot-slip noise (a slipping foot pair can turn the base). Nothing
+here bounds them without an external heading or position; the covariance (``BaseEstimate``,
+``δθ_z`` and ``δp_xy``) grows to show it. In the synthetic 10 s test (BMI088 noise, 0.5 °/s
+initial gyro bias) the yaw error stays within 0.7°. Heights are relative to the ground under
+the stance feet at initialisation.
 
 The base B carries the IMU at ``R_BI`` (IMU axes in B) and ``r_BI`` (IMU origin in B):
 ``R_WB = R_WI R_BIᵀ``, ``p_B = p_I − R_WB r_BI``, ``ω_B = R_BI ω_I``,
@@ -101,6 +108,10 @@ class BaseEstimator:
             prior: Initial uncertainties (default :class:`EstimatorPrior`).
             gravity: Magnitude of gravity (m/s²).
             max_time_step_s: Longest ``dt`` accepted by :meth:`propagate`.
+
+        Raises:
+            EstimatorInputError: The mount's rotation is not a rotation matrix, or a bad
+                ``max_time_step_s``.
         """
         self.contact_names = tuple(contact_names)
         mount = imu_mount or ImuMount()
@@ -110,6 +121,15 @@ class BaseEstimator:
         self._position_imu_in_base = checked_array(
             mount.position_imu_in_base, "imu_mount.position_imu_in_base", (3,)
         )
+        rotation = self._rotation_imu_to_base
+        if not (
+            np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6) and np.linalg.det(rotation) > 0
+        ):
+            raise EstimatorInputError(
+                "imu_mount.rotation_imu_to_base", f"not a rotation matrix: {rotation.tolist()}"
+            )
+        if not max_time_step_s > 0:
+            raise EstimatorInputError("max_time_step_s", f"{max_time_step_s=} must be positive")
         self.noise = noise or EstimatorNoise()
         self.prior = prior or EstimatorPrior()
         self._gravity = np.array([0.0, 0.0, -gravity])
@@ -227,7 +247,7 @@ class BaseEstimator:
     def propagate(
         self, angular_velocity_imu_in_imu: np.ndarray, specific_force_imu_in_imu: np.ndarray, dt
     ) -> None:
-        """Integrate one IMU sample over ``dt`` s (Hartley et al. 2020, Sec. 4).
+        """Integrate one IMU sample over ``dt`` s (Hartley et al. 2020, IMU propagation).
 
         Args:
             angular_velocity_imu_in_imu: Gyro reading (rad/s).
@@ -268,7 +288,7 @@ class BaseEstimator:
     # -- correction ----------------------------------------------------------------------
 
     def correct(self, kinematics: LegKinematics, contact_flags: Sequence[bool]) -> None:
-        """Leg-kinematics update, then contact bookkeeping (Hartley et al. 2020, Sec. 5, 7).
+        """Leg-kinematics correction, then contact bookkeeping (Hartley et al. 2020).
 
         Contacts that left stance are marginalised; those still in stance correct the
         state; those newly in stance are added at ``p̂ + R̂ y``.

@@ -52,7 +52,7 @@ class EstimatorNoise:
     """Noise model, continuous-time densities (BMI088-class MEMS IMU defaults).
 
     White-noise densities are the Bosch BMI088 data sheet's output noise densities
-    (BST-BMI088-DS001, Table 1–2: gyroscope 0.014 °/s/√Hz, accelerometer 175 µg/√Hz). The
+    (BST-BMI088-DS001, specifications: gyroscope 0.014 °/s/√Hz, accelerometer 175 µg/√Hz). The
     data sheet gives no bias random walk; the defaults are conservative consumer-MEMS
     Allan-deviation values (a bias drifting ~0.6 °/s and ~0.06 m/s² per hour, 1σ).
 

@@ -30,7 +30,7 @@ def propagate_mean(
     gravity: np.ndarray,
     dt: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """IMU dynamics integrated exactly for inputs constant over ``dt`` (Hartley 2020, Sec. 4).
+    """IMU dynamics integrated exactly for inputs constant over ``dt`` (Hartley 2020, propagation).
 
     ``R⁺ = R Γ₀(ω dt)``, ``v⁺ = v + (R Γ₁(ω dt) a + g) dt``,
     ``p⁺ = p + v dt + (R Γ₂(ω dt) a + g/2) dt²``; contact points stay.
@@ -59,7 +59,7 @@ def propagate_mean(
 def error_dynamics_matrix(
     rotation: np.ndarray, columns: np.ndarray, gravity: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``A`` and ``G`` of ``ξ̇ = A ξ + G w`` (Hartley 2020, Sec. 4 and Sec. 6, with biases).
+    """``A`` and ``G`` of ``ξ̇ = A ξ + G w`` (Hartley 2020, with IMU biases).
 
     ``A``: ``∂ξ̇_v/∂ξ_R = [g]×``, ``∂ξ̇_p/∂ξ_v = I``; bias columns ``−Ad_X̂`` on ``ζ_g`` and
     ``−R̂`` in the ``ξ_v`` rows on ``ζ_a``. ``G = blkdiag(Ad_X̂, I₆)`` in the state order,
@@ -90,7 +90,7 @@ def error_transition_matrix(a_matrix: np.ndarray, dt: float) -> np.ndarray:
 
     The chain ``ζ → ξ_R → ξ_v → ξ_p`` has three links and ``A`` no other path, so the series
     stops; without biases the right-invariant error dynamics are autonomous and this
-    ``Φ`` is exact (Hartley 2020, Sec. 4, log-linear property).
+    ``Φ`` is exact (Hartley 2020, the log-linear property).
     """
     a_dt = a_matrix * dt
     a_dt2 = a_dt @ a_dt
@@ -100,7 +100,7 @@ def error_transition_matrix(a_matrix: np.ndarray, dt: float) -> np.ndarray:
 def kinematic_innovation(
     rotation: np.ndarray, columns: np.ndarray, contact_slot: int, measurement: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Innovation and Jacobian of one stance-contact measurement (Hartley 2020, Sec. 5).
+    """Innovation and Jacobian of one stance contact (Hartley 2020, kinematic correction).
 
     The measurement ``y = Rᵀ (d − p)`` (contact point in I) is a right-invariant
     observation ``Y = X⁻¹ b``; its innovation ``z = R̂ y − (d̂ − p̂)`` obeys

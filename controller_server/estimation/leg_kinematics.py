@@ -1,7 +1,7 @@
 """Contact points relative to the base from joint encoders, computed by Pinocchio.
 
-The leg-kinematics measurement of the base estimator (Hartley et al. 2020, Sec. 5,
-"forward kinematic measurements"; Bloesch et al. 2012, Sec. III-C) is the position of each
+The leg-kinematics measurement of the base estimator (Hartley et al. 2020, forward
+kinematic measurements; Bloesch et al. 2012, kinematic measurement model) is the position of each
 stance contact point in the base frame, ``s(α)``, with its Jacobian ``J(α) = ∂s/∂α`` with
 respect to the joint positions, which maps encoder noise to measurement noise:
 ``Cov[s] = J Σ_α Jᵀ``. With the free-flyer at the identity the world frame *is* the base

@@ -1,7 +1,7 @@
 """SO(3) and SE_{2+K}(3) helpers for the contact-aided invariant EKF.
 
 An element of SE_{2+K}(3) (Hartley et al. 2020, "Contact-aided invariant extended Kalman
-filtering for robot state estimation", IJRR, Sec. 3 "the state as a matrix Lie group";
+filtering for robot state estimation", IJRR 2020, the state as a matrix Lie group;
 arXiv:1904.09251) is a rotation ``R`` with ``2 + K`` vectors ``x_i`` (velocity, position,
 K contact positions), the matrix ``[[R, x_1 … x_{2+K}], [0, I]]``. Its tangent vector is
 ``ξ = [ξ_R, ξ_1, …, ξ_{2+K}]`` (3 + 3(2 + K) numbers) and
@@ -9,8 +9,8 @@ K contact positions), the matrix ``[[R, x_1 … x_{2+K}], [0, I]]``. Its tangent
 * ``exp(ξ) = (Γ₀(ξ_R), Γ₁(ξ_R) ξ_1, …, Γ₁(ξ_R) ξ_{2+K})``,
 * ``Ad_X = [[R, 0 …], [[x_i]× R, … R …]]`` (block lower triangular),
 
-with ``Γ_m(φ) = Σ_n (φ×)ⁿ / (n + m)!`` the series of Hartley et al. 2020, Appendix
-("Γ functions"): ``Γ₀`` is the SO(3) exponential, ``Γ₁`` its left Jacobian.
+with ``Γ_m(φ) = Σ_n (φ×)ⁿ / (n + m)!`` the series of Hartley et al. 2020
+(their Γ functions): ``Γ₀`` is the SO(3) exponential, ``Γ₁`` its left Jacobian.
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ def skew(vector: np.ndarray) -> np.ndarray:
 
 
 def so3_gamma(phi: np.ndarray, order: int) -> np.ndarray:
-    """``Γ_m(φ) = Σ_{n≥0} (φ×)ⁿ / (n + m)!`` for ``m`` in 0, 1, 2 (Hartley et al. 2020, App.).
+    """``Γ_m(φ) = Σ_{n≥0} (φ×)ⁿ / (n + m)!`` for ``m`` in 0, 1, 2 (Hartley et al. 2020).
 
     Closed forms with ``θ = |φ|``:
     ``Γ₀ = I + sin θ/θ φ× + (1 − cos θ)/θ² φ×²``,
@@ -136,7 +136,7 @@ def so3_log(rotation: np.ndarray) -> np.ndarray:
 
 
 def sek3_exp(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Exponential of SE_{2+K}(3) (Hartley et al. 2020, Sec. 3, exp of the Lie algebra).
+    """Exponential of SE_{2+K}(3) (Hartley et al. 2020).
 
     Args:
         xi: Tangent vector ``[ξ_R, ξ_1, …, ξ_N]``, ``(3 + 3N,)``.
@@ -151,7 +151,7 @@ def sek3_exp(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def sek3_adjoint(rotation: np.ndarray, columns: np.ndarray) -> np.ndarray:
-    """Adjoint matrix of ``X = (R, x_1 … x_N)`` (Hartley et al. 2020, Sec. 3).
+    """Adjoint matrix of ``X = (R, x_1 … x_N)`` (Hartley et al. 2020).
 
     ``Ad_X = [[R, 0, …, 0], [[x_1]× R, R, …], …, [[x_N]× R, 0, …, R]]``, so that
     ``X exp(ξ) X⁻¹ = exp(Ad_X ξ)``.

@@ -333,6 +333,8 @@ def test_nan_and_misshapen_inputs_raise_typed_errors_naming_the_field():
     np.testing.assert_array_equal(after.covariance, before.covariance)
     estimator.reset()
     assert not estimator.initialized
+    with pytest.raises(EstimatorInputError, match="rotation_imu_to_base"):
+        BaseEstimator(["left"], imu_mount=ImuMount(rotation_imu_to_base=2 * np.eye(3)))
     with pytest.raises(EstimatorInputError):
         estimator.estimate()
 
@@ -361,7 +363,7 @@ def test_gamma_series_and_group_exp_log_round_trip():
 
 
 def test_right_invariant_error_propagation_matches_the_group_exactly_without_bias_errors():
-    """``ξ⁺ = Φ ξ`` for the log of ``X̂⁺ X⁺⁻¹`` (log-linearity, Hartley 2020 Sec. 4)."""
+    """``ξ⁺ = Φ ξ`` for the log of ``X̂⁺ X⁺⁻¹`` (log-linearity, Hartley 2020)."""
     rng = np.random.default_rng(1)
     dt = 0.01
     for _ in range(5):
