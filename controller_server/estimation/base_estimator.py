@@ -143,7 +143,7 @@ class BaseEstimator:
         self._bias = np.zeros(6)  # [b_g, b_a] in I
         self._covariance = np.zeros((15, 15))
         self._stance: list[int] = []  # contact index of each contact column
-        self._angular_velocity_imu = np.zeros(3)
+        self._gyro_reading = np.zeros(3)  # last raw gyro, for ω_B with the current bias
         self.initialized = False
 
     # -- inputs --------------------------------------------------------------------------
@@ -265,7 +265,7 @@ class BaseEstimator:
         self._require_initialized()
         omega = gyro - self._bias[:3]
         accel = accel - self._bias[3:]
-        self._angular_velocity_imu = omega
+        self._gyro_reading = gyro
         # A and G at the mid-step state: the bias columns then match the exact transition
         # to O(dt³) (A itself changes with the state over the step).
         middle = propagate_mean(self._rotation, self._columns, omega, accel, self._gravity, dt / 2)
@@ -366,13 +366,11 @@ class BaseEstimator:
         accelerometer reading and the stance feet (see :meth:`initialize`).
         """
         if not self.initialized:
+            gyro = checked_array(angular_velocity_imu_in_imu, "angular_velocity_imu_in_imu", (3,))
             self.initialize(
                 kinematics, contact_flags, specific_force_imu_in_imu=specific_force_imu_in_imu
             )
-            self._angular_velocity_imu = (
-                checked_array(angular_velocity_imu_in_imu, "angular_velocity_imu_in_imu", (3,))
-                - self._bias[:3]
-            )
+            self._gyro_reading = gyro
         else:
             self._check_kinematics(kinematics, contact_flags)  # before changing anything
             self.propagate(angular_velocity_imu_in_imu, specific_force_imu_in_imu, dt)
@@ -384,7 +382,7 @@ class BaseEstimator:
         self._require_initialized()
         rotation_base = self._rotation @ self._rotation_imu_to_base.T
         offset = self._position_imu_in_base
-        angular_velocity_base = self._rotation_imu_to_base @ self._angular_velocity_imu
+        angular_velocity_base = self._rotation_imu_to_base @ (self._gyro_reading - self._bias[:3])
         velocity_base = self._columns[0] - rotation_base @ np.cross(angular_velocity_base, offset)
         position_base = self._columns[1] - rotation_base @ offset
         # Invariant errors to conventional base errors (see BaseEstimate.covariance).

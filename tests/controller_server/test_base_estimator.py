@@ -465,3 +465,47 @@ def test_leg_kinematics_match_pinocchio_placements_and_finite_differences():
         np.testing.assert_allclose(
             kinematics.jacobians[:, :, column], (p_plus - p_minus) / (2 * h), atol=1e-6
         )
+
+
+def test_reported_covariance_maps_invariant_errors_to_base_errors():
+    """The output covariance is ``T P Tᵀ``; ``T`` against perturbing the filter's state."""
+    rng = np.random.default_rng(6)
+    estimator = BaseEstimator(["left", "right"], imu_mount=MOUNT)
+    truth = base_motion(0.7)
+    gyro, accel = exact_imu(0.7, truth=truth)
+    kinematics = LegKinematics(
+        feet_in_base(0.7, truth=truth), np.repeat(LEG_JACOBIAN[None], 2, axis=0)
+    )
+    estimator.step(gyro, accel, 0.002, kinematics, [True, True])
+    estimator.step(gyro, accel, 0.002, kinematics, [True, True])
+    state = (estimator._rotation.copy(), estimator._columns.copy(), estimator._bias.copy())
+    base = estimator.estimate()
+    dim = len(estimator._covariance)
+    eps = 1e-6
+    for j in rng.choice(15, size=8, replace=False):
+        xi = np.zeros(dim)
+        xi[j] = eps
+        step_r, step_c = sek3_exp(np.r_[xi[0:9], xi[15:]])
+        estimator._rotation = step_r @ state[0]
+        estimator._columns = state[1] @ step_r.T + step_c
+        estimator._bias = state[2] + xi[9:15]
+        moved = estimator.estimate()
+        rotation_0 = pin.Quaternion(base.orientation_base_in_world_xyzw).toRotationMatrix()
+        rotation_1 = pin.Quaternion(moved.orientation_base_in_world_xyzw).toRotationMatrix()
+        difference = np.concatenate(
+            [
+                so3_log(rotation_1 @ rotation_0.T),
+                moved.linear_velocity_base_in_world - base.linear_velocity_base_in_world,
+                moved.position_base_in_world - base.position_base_in_world,
+                moved.gyro_bias_in_imu - base.gyro_bias_in_imu,
+                moved.accel_bias_in_imu - base.accel_bias_in_imu,
+            ]
+        )
+        estimator._covariance = np.zeros((dim, dim))
+        estimator._covariance[j, j] = 1.0
+        # T e_j e_jᵀ Tᵀ against the outer product of the finite difference (signs included).
+        column = difference / eps
+        np.testing.assert_allclose(
+            estimator.estimate().covariance, np.outer(column, column), atol=1e-4
+        )
+        estimator._rotation, estimator._columns, estimator._bias = (a.copy() for a in state)
