@@ -1,0 +1,27 @@
+"""Base state estimation from an IMU and leg kinematics (contact-aided invariant EKF)."""
+
+from controller_server.estimation.base_estimator import BaseEstimator
+from controller_server.estimation.estimate import (
+    BaseEstimate,
+    EstimatorInputError,
+    EstimatorNoise,
+    EstimatorPrior,
+    ImuMount,
+)
+from controller_server.estimation.leg_kinematics import (
+    LegKinematics,
+    compute_leg_kinematics,
+    robot_leg_kinematics,
+)
+
+__all__ = [
+    "BaseEstimate",
+    "BaseEstimator",
+    "EstimatorInputError",
+    "EstimatorNoise",
+    "EstimatorPrior",
+    "ImuMount",
+    "LegKinematics",
+    "compute_leg_kinematics",
+    "robot_leg_kinematics",
+]

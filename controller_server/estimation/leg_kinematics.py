@@ -1,0 +1,105 @@
+"""Contact points relative to the base from joint encoders, computed by Pinocchio.
+
+The leg-kinematics measurement of the base estimator (Hartley et al. 2020, forward
+kinematic measurements; Bloesch et al. 2012, kinematic measurement model) is the position of each
+stance contact point in the base frame, ``s(α)``, with its Jacobian ``J(α) = ∂s/∂α`` with
+respect to the joint positions, which maps encoder noise to measurement noise:
+``Cov[s] = J Σ_α Jᵀ``. With the free-flyer at the identity the world frame *is* the base
+frame, so Pinocchio's world-aligned frame Jacobians are the base-frame ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from controller_server.estimation.lie import skew
+
+__all__ = ["LegKinematics", "compute_leg_kinematics", "robot_leg_kinematics"]
+
+_BASE_AT_IDENTITY = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class LegKinematics:
+    """Where the contact points are relative to the base, from the encoders.
+
+    Attributes:
+        position_points_in_base: ``(K, 3)`` contact points (m) in the base frame, one per
+            contact, in the estimator's contact order.
+        jacobians: ``(K, 3, n)`` derivatives of those points with respect to the joint
+            positions (m/rad, or m/m for prismatic joints); ``n`` is the number of joint
+            velocities (for ball joints the derivative is along the joint's tangent).
+    """
+
+    position_points_in_base: np.ndarray
+    jacobians: np.ndarray
+
+
+def compute_leg_kinematics(
+    model: pin.Model,
+    data: pin.Data,
+    joint_position: np.ndarray,
+    frame_ids: Sequence[int],
+    points_in_frame: Sequence[np.ndarray] | None = None,
+) -> LegKinematics:
+    """Contact points in the base frame and their joint Jacobians (Pinocchio).
+
+    Runs ``computeJointJacobians`` (forward kinematics included) and
+    ``updateFramePlacements`` at ``q = [0, 0, 0, 0, 0, 0, 1, joint_position]``. For a point
+    ``r`` in frame ``f`` the point is ``p_f + R_f r`` and its Jacobian
+    ``J_lin − [R_f r]× J_ang`` (world-aligned frame Jacobian, joint columns only).
+
+    Args:
+        model: Pinocchio model whose joint 1 is a free flyer (the base).
+        data: Its data (overwritten).
+        joint_position: ``(model.nq − 7,)`` joint positions (Pinocchio order).
+        frame_ids: One frame per contact.
+        points_in_frame: Per contact, the point ``(3,)`` in its frame (m); default the origin.
+
+    Returns:
+        The points and Jacobians.
+    """
+    q = np.concatenate([_BASE_AT_IDENTITY, np.asarray(joint_position, dtype=float)])
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    count = len(frame_ids)
+    positions = np.zeros((count, 3))
+    jacobians = np.zeros((count, 3, model.nv - 6))
+    for k, frame_id in enumerate(frame_ids):
+        placement = data.oMf[frame_id]
+        offset = np.zeros(3) if points_in_frame is None else np.asarray(points_in_frame[k])
+        offset_in_base = placement.rotation @ offset
+        positions[k] = placement.translation + offset_in_base
+        frame_jacobian = pin.getFrameJacobian(
+            model, data, frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        )
+        point_jacobian = frame_jacobian[:3] - skew(offset_in_base) @ frame_jacobian[3:]
+        jacobians[k] = point_jacobian[:, 6:]
+    return LegKinematics(position_points_in_base=positions, jacobians=jacobians)
+
+
+def robot_leg_kinematics(robot, data: pin.Data, joint_position: np.ndarray) -> LegKinematics:
+    """:func:`compute_leg_kinematics` for a ``RobotModel``'s contacts, one point per contact.
+
+    Each contact is represented by the centroid of its points (the sole centre for the
+    built-in models' four-corner soles).
+
+    Args:
+        robot: A :class:`controller_server.models.RobotModel`.
+        data: ``pin.Data`` of ``robot.model`` (overwritten).
+        joint_position: ``(robot.nq_joints,)`` joint positions in wire order.
+
+    Returns:
+        The points and Jacobians, in ``robot.contacts`` order.
+    """
+    return compute_leg_kinematics(
+        robot.model,
+        data,
+        joint_position,
+        [contact.frame_id for contact in robot.contacts],
+        [np.mean(contact.points_in_frame, axis=0) for contact in robot.contacts],
+    )
