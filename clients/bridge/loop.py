@@ -248,7 +248,6 @@ class Bridge:
         self._damping = joint_map.motor_damping(settings.safe_damping_Nm_s_per_rad)
         self._commands = self._zero_commands()
         self._held: Command | None = None
-        self._enabled = False
         self._failed_buses: set[str] = set()
         self._pool: ThreadPoolExecutor | None = None
 
@@ -287,7 +286,6 @@ class Bridge:
                 bus.arm_watchdog(self.settings.actuator_watchdog_s)
         for bus in self.buses.values():
             bus.enable()
-        self._enabled = True
         self._absorb(self._exchange(self._commands))
         self._held = None
         self.watchdog.feed()
@@ -315,7 +313,6 @@ class Bridge:
         for name, result in results.items():
             if isinstance(result, BusError):
                 log.error("could not disable the actuators of bus %r: %s", name, result.detail)
-        self._enabled = False
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
