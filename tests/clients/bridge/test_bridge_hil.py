@@ -127,3 +127,14 @@ def test_the_revolute_humanoid_stands_on_odrives(server):
     assert run.fall_reason == "" and run.report.latches == []
     assert run.report.commands == 1001
     assert all(link.faults == 0 for link in run.report.links)
+
+
+def test_the_revolute_humanoid_stands_through_the_bridge_in_mujoco(server):
+    """The emulated robot in the independent physics engine: 2 s standing on MIT actuators."""
+    config = load_bridge_config(EXAMPLES / "revolute_humanoid_mit.toml")
+    emulation = config.emulation.model_copy(update={"backend": "mujoco", "pushes": []})
+    config = config.model_copy(update={"emulation": emulation})
+    run = run_bridge(config, server.endpoint, emulate=True, duration_s=2.0)
+    assert run.fall_reason == "" and run.report.latches == []
+    assert run.report.commands == 1001
+    assert sum(link.missed for link in run.report.links) == 0
