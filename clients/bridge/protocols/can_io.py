@@ -45,7 +45,7 @@ from clients.bridge.protocols.mit import (
     parse_reply,
 )
 
-__all__ = ["DamiaoBus", "MitBus", "RegisterWriteError"]
+__all__ = ["CanChannel", "DamiaoBus", "MitBus", "RegisterWriteError"]
 
 _T = TypeVar("_T")
 _DRAIN_LIMIT = 10_000  # frames dropped before an exchange at most (a flooding bus still ends)
@@ -63,8 +63,13 @@ class RegisterWriteError(BusError):
         super().__init__(bus, detail)
 
 
-class _CanBus:
-    """Sending, draining and gathering on one python-can bus, with the errors as BusError."""
+class CanChannel:
+    """Sending, draining and gathering on one python-can bus, with the errors as BusError.
+
+    The base of every CAN actuator bus (MIT, Damiao, ODrive): it owns the
+    python-can bus, shuts it down once on :meth:`close`, and is a context
+    manager.
+    """
 
     def __init__(self, bus: can.BusABC, name: str, reply_timeout_s: float):
         if not reply_timeout_s > 0.0:
@@ -139,7 +144,7 @@ class _CanBus:
             self._closed = True
             self._bus.shutdown()
 
-    def __enter__(self) -> _CanBus:
+    def __enter__(self) -> CanChannel:
         return self
 
     def __exit__(self, *exc_info: object) -> None:
@@ -156,7 +161,7 @@ def _check_commands(name: str, known: Mapping[int, object], ids: Iterable[int]) 
         raise ValueError(f"bus {name!r} has no actuator {unknown} (it has {sorted(known)})")
 
 
-class _MitFramedBus(_CanBus):
+class _MitFramedBus(CanChannel):
     """A bus of actuators commanded with MIT-mode frames (MIT and Damiao): one exchange."""
 
     _ranges_by_id: dict[int, MitRanges]

@@ -11,7 +11,8 @@ from collections.abc import Iterable, Mapping
 
 import can
 
-from clients.bridge.actuator import BusError, MotorCommand, MotorFeedback
+from clients.bridge.actuator import MotorCommand, MotorFeedback
+from clients.bridge.protocols.can_io import CanChannel
 from clients.bridge.protocols.odrive import (
     DEFAULT_WATCHDOG_ENDPOINTS,
     TURN_RAD,
@@ -48,7 +49,7 @@ from clients.bridge.protocols.odrive import (
 __all__ = ["ODriveBus"]
 
 
-class ODriveBus:
+class ODriveBus(CanChannel):
     """ODrives on one CAN channel, each axis a CANSimple node, in torque control.
 
     Implements :class:`clients.bridge.actuator.ActuatorBus`. Each
@@ -115,9 +116,8 @@ class ODriveBus:
             raise InvalidCommand(-1, "reply_timeout_s", f"{reply_timeout_s=} must be > 0")
         if temperature_period < 0:
             raise InvalidCommand(-1, "temperature_period", f"{temperature_period=} must be ≥ 0")
-        self.name = name
+        super().__init__(bus, name, reply_timeout_s)
         self.actuator_ids: tuple[int, ...] = ids
-        self.reply_timeout_s = reply_timeout_s
         self.firmware = firmware
         self.watchdog_endpoints = watchdog_endpoints
         self.request_torques = request_torques and firmware is Firmware.V0_6
@@ -126,8 +126,6 @@ class ODriveBus:
         self.torque_limit_Nm = self._limits(torque_limit_Nm)
         self.malformed_frames = 0
         """Frames from our nodes that did not decode (counted, never raised)."""
-        self._bus = bus
-        self._closed = False
         self._exchanges = 0
         self._heartbeat: dict[int, Heartbeat] = {}
         self._heartbeat_s: dict[int, float] = {}
@@ -256,18 +254,6 @@ class ODriveBus:
             frames.append(make_rx_sdo_write(node, ids.enable_watchdog, timeout_s > 0.0, "bool"))
         self._send(frames)
 
-    def close(self) -> None:
-        """Shut the CAN bus down (once)."""
-        if not self._closed:
-            self._closed = True
-            self._bus.shutdown()
-
-    def __enter__(self) -> ODriveBus:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
-
     # ------------------------------------------------------------ internals
 
     def _idle(self, frames: list[can.Message]) -> None:
@@ -275,21 +261,6 @@ class ODriveBus:
         for node in self.actuator_ids:
             self._closed_loop_expected[node] = False
             self._commanded_Nm[node] = 0.0
-
-    def _send(self, frames: list[can.Message]) -> None:
-        try:
-            for frame in frames:
-                self._bus.send(frame)
-        except can.CanError as error:
-            raise BusError(
-                self.name, f"send failed ({error}); check the interface is up and terminated"
-            ) from error
-
-    def _recv(self, timeout_s: float) -> can.Message | None:
-        try:
-            return self._bus.recv(timeout=timeout_s)
-        except can.CanError as error:
-            raise BusError(self.name, f"receive failed ({error})") from error
 
     def _drain(self) -> None:
         """Take in what arrived since the last call (cyclic heartbeats), without waiting."""
