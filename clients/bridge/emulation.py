@@ -29,8 +29,7 @@ from clients.bridge.joint_map import JointMap
 from clients.bridge.plant import Plant, PlantPacer, RealTimePacer
 from clients.bridge.protocols.damiao import DAMIAO_MOTOR_MODELS
 from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
-from clients.sim.backend import PhysicsBackend
-from clients.sim.runner import standing_state
+from clients.sim.runner import physics_backend, standing_state
 from protocol.messages import Welcome
 
 __all__ = ["Emulation"]
@@ -133,7 +132,13 @@ class Emulation:
         for bus_name, spec in config.buses.items():
             timeout_s = max(spec.reply_timeout_s, least_s)
             self.bus_overrides[bus_name]["reply_timeout_s"] = timeout_s
-        backend = _backend(config)
+        emulation = config.emulation
+        backend = physics_backend(
+            emulation.backend,
+            config.bridge.model,
+            emulation.physics_rate_hz,
+            emulation.friction_coefficient,
+        )
         backend.reset(standing_state(welcome, {}))
         self.plant = Plant(
             backend,
@@ -176,21 +181,3 @@ class Emulation:
 
     def __exit__(self, *exc_info: object) -> None:
         self._stack.close()
-
-
-def _backend(config: BridgeConfig) -> PhysicsBackend:
-    """The emulation's physics at its rate and friction."""
-    emulation = config.emulation
-    timestep_s = 1.0 / emulation.physics_rate_hz
-    model = config.bridge.model
-    if emulation.backend == "mujoco":
-        from clients.sim.mujoco_backend import MujocoBackend
-
-        return MujocoBackend(
-            model, friction_coefficient=emulation.friction_coefficient, timestep_s=timestep_s
-        )
-    from clients.sim.reference import ReferenceBackend
-
-    return ReferenceBackend(
-        model, friction_coefficient=emulation.friction_coefficient, timestep_s=timestep_s
-    )

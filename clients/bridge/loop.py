@@ -536,10 +536,7 @@ class Bridge:
         failed = [result for result in results.values() if isinstance(result, BusError)]
         if failed:
             raise failed[0]
-        replies = self.joint_map.gather(results)  # type: ignore[arg-type]
-        for link, reply in zip(self.report.links, replies, strict=True):
-            link.add(reply)
-        return replies
+        return self._counted(results)  # type: ignore[arg-type]
 
     def _hold_safe(self) -> None:
         """Command the safe state on every bus; a failing bus does not stop the others."""
@@ -551,10 +548,16 @@ class Bridge:
             elif name not in self._failed_buses:
                 log.error("cannot command the safe state on bus %r: %s", name, result.detail)
                 self._failed_buses.add(name)
+        self._absorb(self._counted(feedback))
+
+    def _counted(
+        self, feedback: Mapping[str, Mapping[int, MotorFeedback | None]]
+    ) -> list[MotorFeedback | None]:
+        """Each joint's reply (wire order), counted in its link quality."""
         replies = self.joint_map.gather(feedback)
         for link, reply in zip(self.report.links, replies, strict=True):
             link.add(reply)
-        self._absorb(replies)
+        return replies
 
     def _check_joints(self) -> str:
         return check_joints(

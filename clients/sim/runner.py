@@ -43,6 +43,7 @@ __all__ = [
     "RunRecord",
     "fall_reason",
     "make_backend",
+    "physics_backend",
     "run_scenario",
     "standing_state",
     "support_flags",
@@ -56,20 +57,25 @@ FALL_HEIGHT_FRACTION = 0.5
 
 def make_backend(scenario: Scenario) -> PhysicsBackend:
     """The scenario's physics backend at its physics rate and friction."""
-    timestep_s = 1.0 / scenario.physics_rate_hz
-    if scenario.backend == "mujoco":
+    return physics_backend(
+        scenario.backend, scenario.model, scenario.physics_rate_hz, scenario.friction_coefficient
+    )
+
+
+def physics_backend(
+    backend: str, model: str, physics_rate_hz: float, friction_coefficient: float
+) -> PhysicsBackend:
+    """A backend by name (``reference`` or ``mujoco``) for ``model``, at a rate and friction."""
+    timestep_s = 1.0 / physics_rate_hz
+    if backend == "mujoco":
         from clients.sim.mujoco_backend import MujocoBackend
 
         return MujocoBackend(
-            scenario.model,
-            friction_coefficient=scenario.friction_coefficient,
-            timestep_s=timestep_s,
+            model, friction_coefficient=friction_coefficient, timestep_s=timestep_s
         )
     from clients.sim.reference import ReferenceBackend
 
-    return ReferenceBackend(
-        scenario.model, friction_coefficient=scenario.friction_coefficient, timestep_s=timestep_s
-    )
+    return ReferenceBackend(model, friction_coefficient=friction_coefficient, timestep_s=timestep_s)
 
 
 def standing_state(welcome: Welcome, joint_overrides: dict[str, list[float]]) -> RobotState:
