@@ -70,13 +70,13 @@ def main() -> None:
         robot = load_robot_model(name)
         welcome = Session(Hello(model=name)).welcome(0)
         random_inputs = [
-            control_input_from_state(robot, random_state(welcome, rng), want_diagnostics=False)
+            control_input_from_state(robot, random_state(welcome, rng), want_diagnostics=False)[0]
             for _ in range(args.ticks)
         ]
         state_sets = {"random": random_inputs}
         if name == "thesis_humanoid" and RECORDED_STATES.exists():
             state_sets["recorded"] = [
-                control_input_from_state(robot, entry.message, want_diagnostics=False)
+                control_input_from_state(robot, entry.message, want_diagnostics=False)[0]
                 for entry in read_log(RECORDED_STATES)
                 if isinstance(entry.message, State)
             ]

@@ -473,7 +473,7 @@ def main() -> None:
             robot,
             random_state(welcome, rng).model_copy(update={"contact_flags": both_feet}),
             want_diagnostics=False,
-        )
+        )[0]
         for _ in range(args.ticks)
     ]
     controller = create_controller("momentum", robot, {"optimizer_period_ticks": 1})

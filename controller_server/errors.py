@@ -12,8 +12,10 @@ from protocol.errors import ErrorCode, PoiseError
 
 __all__ = [
     "ControllerFailed",
+    "EstimatorInputError",
     "FileTooLarge",
     "FrameNotFound",
+    "ImuFrameError",
     "InvalidParams",
     "ModelError",
     "ModelMismatch",
@@ -87,6 +89,14 @@ class ControllerFailed(ServerFault):
         super().__init__("controller", detail)
 
 
+class EstimatorInputError(ServerFault, ValueError):
+    """A base estimator input is missing, misshapen or not finite; the estimate is unchanged."""
+
+
+class ImuFrameError(ServerFault):
+    """``hello.imu_frame`` names no frame of the model, or one not rigid on the root body."""
+
+
 _WIRE_CODES: dict[type[ServerFault], ErrorCode] = {
     ModelNotFound: ErrorCode.MODEL_NOT_FOUND,
     ModelMismatch: ErrorCode.MODEL_MISMATCH,
@@ -95,6 +105,8 @@ _WIRE_CODES: dict[type[ServerFault], ErrorCode] = {
     UnknownController: ErrorCode.UNKNOWN_CONTROLLER,
     FileTooLarge: ErrorCode.LIMIT_EXCEEDED,
     ControllerFailed: ErrorCode.INTERNAL,
+    EstimatorInputError: ErrorCode.INVALID_FIELD,
+    ImuFrameError: ErrorCode.INVALID_FIELD,
 }
 
 

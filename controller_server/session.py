@@ -11,6 +11,7 @@ import numpy as np
 
 from controller_server.controllers import create_controller
 from controller_server.errors import ModelMismatch
+from controller_server.estimation import ImuBaseEstimator
 from controller_server.models import load_robot_model
 from controller_server.wire import command_from_output, control_input_from_state
 from protocol.messages import Command, Hello, Params, SessionStats, SetParams, State, Welcome
@@ -48,6 +49,7 @@ class Session:
                 field="expected_model_hash",
             )
         self.controller = create_controller(hello.controller, self.robot, hello.params)
+        self.base_estimator = ImuBaseEstimator(self.robot, hello)
         self.diagnostics_period_ticks = hello.diagnostics_period_ticks
         self.session_id = uuid.uuid4().hex
         self.ticks = 0
@@ -74,12 +76,16 @@ class Session:
         """Answer one state with a command."""
         start = time.perf_counter()
         want_diagnostics = self.ticks % self.diagnostics_period_ticks == 0
-        control_input = control_input_from_state(self.robot, state, want_diagnostics)
+        control_input, estimate = control_input_from_state(
+            self.robot, state, want_diagnostics, self.base_estimator
+        )
         output = self.controller.compute(control_input)
         compute_time_s = time.perf_counter() - start
         if not want_diagnostics and output.diagnostics is not None:
             output = dataclasses.replace(output, diagnostics=None)  # computed anyway: not sent
-        command = command_from_output(control_input, output, state.seq, compute_time_s)
+        command = command_from_output(
+            control_input, output, state.seq, compute_time_s, estimate if want_diagnostics else None
+        )
         self._compute_times_s.append(compute_time_s)
         self.ticks += 1
         return command

@@ -10,15 +10,20 @@ acceleration in base axes: ``a_world = R (v̇_local + ω × v_local)``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pinocchio as pin
 
 from controller_server.controllers import ControlInput, ControlOutput
+from controller_server.estimation import BaseEstimate
 from controller_server.models import RobotModel
 from controller_server.spatial import cross
 from protocol.errors import ErrorCode, ProtocolError
 from protocol.fastpath import construct
 from protocol.messages import (
+    BASE_POSE_FIELDS,
+    BaseEstimateDiagnostics,
     Command,
     Diagnostics,
     PrioritizedDiagnostics,
@@ -27,7 +32,16 @@ from protocol.messages import (
     WeightedDiagnostics,
 )
 
-__all__ = ["command_from_output", "control_input_from_state"]
+__all__ = [
+    "EstimateBase",
+    "base_estimate_diagnostics",
+    "check_base_form",
+    "command_from_output",
+    "control_input_from_state",
+]
+
+EstimateBase = Callable[[State], BaseEstimate]
+"""The session's estimate of the base from a state's ``imu`` block (its joints checked)."""
 
 QUATERNION_NORM_TOLERANCE = 0.1
 """A wire quaternion's norm must lie within 1 ± this; the server normalises it.
@@ -60,17 +74,62 @@ def _check_quaternion(field: str, quaternion: np.ndarray, seq: int) -> None:
         )
 
 
+def check_base_form(state: State) -> None:
+    """The state gives the base one way: all of :data:`BASE_POSE_FIELDS`, or ``imu``.
+
+    Raises:
+        ProtocolError: ``INVALID_FIELD`` naming the fields: both forms, or neither
+            (some base fields and no ``imu`` counts as neither, naming the missing ones).
+    """
+    given = [name for name in BASE_POSE_FIELDS if getattr(state, name) is not None]
+    if state.imu is not None:
+        if given:
+            raise ProtocolError(
+                ErrorCode.INVALID_FIELD,
+                given[0],
+                f"the state carries both `imu` and {', '.join(given)}: give the base either "
+                "as the four base fields or as `imu`, not both",
+                state.seq,
+            )
+        return
+    missing = [name for name in BASE_POSE_FIELDS if name not in given]
+    if missing:
+        raise ProtocolError(
+            ErrorCode.INVALID_FIELD,
+            missing[0],
+            f"the state lacks {', '.join(missing)}: give the base either as "
+            f"{', '.join(BASE_POSE_FIELDS)} or as `imu` (an IMU reading, estimated by the server)",
+            state.seq,
+        )
+
+
 def control_input_from_state(
-    robot: RobotModel, state: State, want_diagnostics: bool = True
-) -> ControlInput:
+    robot: RobotModel,
+    state: State,
+    want_diagnostics: bool = True,
+    estimate_base: EstimateBase | None = None,
+) -> tuple[ControlInput, BaseEstimate | None]:
     """Validate a state's sizes against the robot and convert it.
+
+    Args:
+        robot: The session's robot.
+        state: The decoded state.
+        want_diagnostics: Whether the controller should compute diagnostics this tick.
+        estimate_base: For a state with ``imu``: the session's estimator, called once the
+            joints and contacts are checked.
+
+    Returns:
+        The controller's input, and the base estimate when the state carried ``imu``.
 
     Raises:
         ProtocolError: ``BAD_SHAPE`` (wrong lengths) or ``INVALID_FIELD``
             (a quaternion not of unit length within
-            :data:`QUATERNION_NORM_TOLERANCE`), naming the field.
+            :data:`QUATERNION_NORM_TOLERANCE`, the base given both ways or neither,
+            ``imu`` without an estimator), naming the field.
+        EstimatorInputError: From ``estimate_base``.
     """
     seq = state.seq
+    check_base_form(state)
     _check_length("joint_position", state.joint_position, robot.nq_joints, seq)
     _check_length("joint_velocity", state.joint_velocity, robot.nv_joints, seq)
     if len(state.contact_flags) != len(robot.contacts):
@@ -85,31 +144,68 @@ def control_input_from_state(
     if wrenches is not None:
         _check_length("contact_wrench_in_world", wrenches, 6 * len(robot.contacts), seq)
         wrenches = wrenches.reshape(-1, 6)
-    _check_quaternion("orientation_base_in_world_xyzw", state.orientation_base_in_world_xyzw, seq)
     starts = robot.ball_quaternion_starts
     if starts.size:
         quaternions = state.joint_position[robot.ball_quaternion_index].reshape(-1, 4)
         squared_norms = np.einsum("ij,ij->i", quaternions, quaternions)
         worst = int(np.argmax(np.abs(squared_norms - 1.0)))
         _check_quaternion("joint_position", quaternions[worst], seq)
+    estimate = None
+    if state.imu is not None:
+        if state.imu.orientation_imu_in_world_xyzw is not None:
+            _check_quaternion(
+                "imu.orientation_imu_in_world_xyzw", state.imu.orientation_imu_in_world_xyzw, seq
+            )
+        if estimate_base is None:
+            raise ProtocolError(
+                ErrorCode.INVALID_FIELD, "imu", "no base estimator here: send the base pose", seq
+            )
+        estimate = estimate_base(state)
+        position, orientation = (
+            estimate.position_base_in_world,
+            estimate.orientation_base_in_world_xyzw,
+        )
+        linear_velocity = estimate.linear_velocity_base_in_world
+        angular_velocity = estimate.angular_velocity_base_in_base
+    else:
+        position, orientation = state.position_base_in_world, state.orientation_base_in_world_xyzw
+        linear_velocity = state.linear_velocity_base_in_world
+        angular_velocity = state.angular_velocity_base_in_base
+        _check_quaternion("orientation_base_in_world_xyzw", orientation, seq)
 
-    q = np.concatenate(
-        [state.position_base_in_world, state.orientation_base_in_world_xyzw, state.joint_position]
-    )
+    q = np.concatenate([position, orientation, state.joint_position])
     q = pin.normalize(robot.model, q)  # returns the normalised copy
     rotation_base_to_world = pin.Quaternion(q[3:7]).toRotationMatrix()
     v = np.concatenate(
-        [
-            rotation_base_to_world.T @ state.linear_velocity_base_in_world,
-            state.angular_velocity_base_in_base,
-            state.joint_velocity,
-        ]
+        [rotation_base_to_world.T @ linear_velocity, angular_velocity, state.joint_velocity]
     )
-    return ControlInput(state.time_s, q, v, tuple(state.contact_flags), wrenches, want_diagnostics)
+    control_input = ControlInput(
+        state.time_s, q, v, tuple(state.contact_flags), wrenches, want_diagnostics
+    )
+    return control_input, estimate
+
+
+def base_estimate_diagnostics(estimate: BaseEstimate) -> BaseEstimateDiagnostics:
+    """The ``base_estimate`` section of the diagnostics."""
+    return construct(
+        BaseEstimateDiagnostics,
+        position_base_in_world=estimate.position_base_in_world,
+        orientation_base_in_world_xyzw=estimate.orientation_base_in_world_xyzw,
+        linear_velocity_base_in_world=estimate.linear_velocity_base_in_world,
+        angular_velocity_base_in_base=estimate.angular_velocity_base_in_base,
+        gyro_bias_in_imu=estimate.gyro_bias_in_imu,
+        accel_bias_in_imu=estimate.accel_bias_in_imu,
+        covariance=estimate.covariance.reshape(-1),
+        stance_contacts=list(estimate.position_contacts_in_world),
+    )
 
 
 def command_from_output(
-    control_input: ControlInput, output: ControlOutput, seq: int, compute_time_s: float
+    control_input: ControlInput,
+    output: ControlOutput,
+    seq: int,
+    compute_time_s: float,
+    estimate: BaseEstimate | None = None,
 ) -> Command:
     """Build the ``command`` reply for one tick.
 
@@ -152,5 +248,7 @@ def command_from_output(
         values["prioritized"] = construct(
             PrioritizedDiagnostics, **{**section, "priority_levels": levels}
         )
+    if estimate is not None:
+        values["base_estimate"] = base_estimate_diagnostics(estimate)
     diagnostics = construct(Diagnostics, compute_time_s=compute_time_s, **values)
     return construct(Command, seq=seq, diagnostics=diagnostics, **arrays)

@@ -17,12 +17,14 @@ from pydantic import BeforeValidator, PlainSerializer, WithJsonSchema
 from pydantic_core import PydanticCustomError
 
 __all__ = [
+    "MAX_ABS_ACCELERATION",
     "MAX_ABS_JOINT_POSITION",
     "MAX_ABS_POSITION_M",
     "MAX_ABS_TIME_S",
     "MAX_ABS_VELOCITY",
     "MAX_ABS_WRENCH",
     "WIRE_DTYPE",
+    "Acceleration3",
     "ArrayRule",
     "FiniteArray",
     "FloatArray",
@@ -49,6 +51,8 @@ MAX_ABS_WRENCH = 1e6
 """Largest measured contact force or torque entry (N, N·m)."""
 MAX_ABS_TIME_S = 1e12
 """Largest client time (s); Unix time fits."""
+MAX_ABS_ACCELERATION = 1e4
+"""Largest accelerometer entry (m/s²): about 1000 g, beyond any IMU's range."""
 
 
 def array_to_bytes(array: np.ndarray) -> bytes:
@@ -182,3 +186,4 @@ VelocityArray = bounded_array(MAX_ABS_VELOCITY)
 Velocity3 = bounded_array(MAX_ABS_VELOCITY, 3)
 Position3 = bounded_array(MAX_ABS_POSITION_M, 3)
 WrenchArray = bounded_array(MAX_ABS_WRENCH)
+Acceleration3 = bounded_array(MAX_ABS_ACCELERATION, 3)

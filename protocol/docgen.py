@@ -17,8 +17,10 @@ from protocol.errors import ErrorCode
 from protocol.messages import (
     MESSAGE_TYPES,
     PROTOCOL_VERSION,
+    BaseEstimateDiagnostics,
     ContactSpec,
     Diagnostics,
+    ImuSample,
     JointInfo,
     PrioritizedDiagnostics,
     PriorityLevelReport,
@@ -57,6 +59,15 @@ quaternions scalar-last `[x, y, z, w]`; joint order is the order of
 `welcome.joints`; contact order is the order of `welcome.contacts`.
 Sessions idle longer than the server's `--session-timeout` expire; the next
 `state` then gets `NO_SESSION` and the client repeats `hello`.
+
+A `state` gives the floating base one of two ways: directly (all four of
+`position_base_in_world`, `orientation_base_in_world_xyzw`,
+`linear_velocity_base_in_world`, `angular_velocity_base_in_base`), or as an
+IMU reading (`imu`), from which the server's per-session estimator (a
+contact-aided invariant EKF on the IMU, the joints and `contact_flags`, see
+`docs/estimation.md`) computes them; the estimate comes back in
+`diagnostics.base_estimate`. Both forms, or neither, is an `INVALID_FIELD`
+error naming the fields.
 
 A session belongs to the client's routing id and its CURVE key (or, without
 CURVE, its address). Each request is answered within the server's deadline
@@ -120,10 +131,12 @@ def render_protocol_doc() -> str:
     for part in (
         ContactSpec,
         JointInfo,
+        ImuSample,
         Diagnostics,
         WeightedDiagnostics,
         PrioritizedDiagnostics,
         PriorityLevelReport,
+        BaseEstimateDiagnostics,
         SessionStats,
     ):
         sections.append(f"## {part.__name__}\n\n{(part.__doc__ or '').strip()}\n\n{_table(part)}\n")

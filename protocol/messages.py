@@ -10,16 +10,19 @@ in ``welcome``. Every field declares its shape, unit and frame, and
 
 from __future__ import annotations
 
+import math
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from protocol.arrays import (
+    MAX_ABS_ACCELERATION,
     MAX_ABS_JOINT_POSITION,
     MAX_ABS_POSITION_M,
     MAX_ABS_TIME_S,
     MAX_ABS_VELOCITY,
     MAX_ABS_WRENCH,
+    Acceleration3,
     FloatArray,
     JointPositionArray,
     Position3,
@@ -32,6 +35,8 @@ from protocol.arrays import (
 from protocol.errors import ErrorCode
 
 __all__ = [
+    "BASE_POSE_FIELDS",
+    "MAX_ABS_ACCELERATION",
     "MAX_ABS_JOINT_POSITION",
     "MAX_ABS_POSITION_M",
     "MAX_ABS_TIME_S",
@@ -39,12 +44,14 @@ __all__ = [
     "MAX_ABS_WRENCH",
     "MESSAGE_TYPES",
     "PROTOCOL_VERSION",
+    "BaseEstimateDiagnostics",
     "Bye",
     "Command",
     "ContactSpec",
     "Diagnostics",
     "Error",
     "Hello",
+    "ImuSample",
     "JointInfo",
     "Message",
     "Params",
@@ -159,6 +166,40 @@ class Hello(Message):
         ge=1,
         le=10_000,
     )
+    imu_frame: str | None = wire_field(
+        "Model frame (a body or any frame of the model) the IMU of `state.imu` is fixed to; "
+        "it must be rigidly attached to the root body. Default: the root body.",
+        default=None,
+        max_length=200,
+    )
+    imu_position_in_frame: tuple[float, float, float] = wire_field(
+        "IMU origin in `imu_frame`, each |x| ≤ 10.",
+        shape="3",
+        unit="m",
+        frame="`imu_frame`",
+        default=(0.0, 0.0, 0.0),
+    )
+    imu_orientation_in_frame_xyzw: tuple[float, float, float, float] = wire_field(
+        "IMU axes in `imu_frame`, quaternion scalar last (normalised; norm within 10 % of 1).",
+        shape="4",
+        frame="`imu_frame`",
+        default=(0.0, 0.0, 0.0, 1.0),
+    )
+
+    @model_validator(mode="after")
+    def _imu_mount(self) -> Hello:
+        if not all(math.isfinite(x) and abs(x) <= 10.0 for x in self.imu_position_in_frame):
+            raise ValueError(
+                f"imu_position_in_frame must be finite and within 10 m, got "
+                f"{list(self.imu_position_in_frame)}"
+            )
+        norm = math.sqrt(sum(c * c for c in self.imu_orientation_in_frame_xyzw))
+        if not abs(norm - 1.0) <= 0.1:
+            raise ValueError(
+                f"imu_orientation_in_frame_xyzw must be a unit quaternion xyzw, got "
+                f"{list(self.imu_orientation_in_frame_xyzw)} (norm {norm:.3g})"
+            )
+        return self
 
     @model_validator(mode="after")
     def _one_model_source(self) -> Hello:
@@ -205,6 +246,42 @@ class Welcome(Message):
     params: dict[str, ParamValue] = wire_field("Controller parameters in force.")
 
 
+BASE_POSE_FIELDS = (
+    "position_base_in_world",
+    "orientation_base_in_world_xyzw",
+    "linear_velocity_base_in_world",
+    "angular_velocity_base_in_base",
+)
+"""The fields of a ``state`` that give the base directly; the other form is ``imu``."""
+
+
+class ImuSample(_Strict):
+    """One IMU reading, in the IMU frame announced in ``hello`` (``imu_frame`` and offset).
+
+    Send the newest sample with each state; the server integrates it over the time since
+    the previous state's ``time_s`` (a sample held over several states is integrated as held).
+    """
+
+    angular_velocity_imu_in_imu: Velocity3 = wire_field(
+        "Gyroscope reading, each |ω| ≤ 1000.", shape="3", unit="rad/s", frame="IMU"
+    )
+    linear_acceleration_imu_in_imu: Acceleration3 = wire_field(
+        f"Accelerometer reading: specific force a − g of the IMU point (+9.81 up at rest), "
+        f"each |f| ≤ {MAX_ABS_ACCELERATION:g}.",
+        shape="3",
+        unit="m/s²",
+        frame="IMU",
+    )
+    orientation_imu_in_world_xyzw: QuaternionXYZW | None = wire_field(
+        "Optional orientation from the IMU's own filter (AHRS), scalar last; the estimator "
+        "starts from it (and restarts from it after a reset); without it, it levels on the "
+        "accelerometer with yaw zero.",
+        shape="4",
+        frame="world",
+        default=None,
+    )
+
+
 class State(Message):
     """Robot state measured by the client at ``time_s``."""
 
@@ -229,19 +306,38 @@ class State(Message):
         unit="rad/s (m/s)",
         frame="joint",
     )
-    position_base_in_world: Position3 = wire_field(
-        "Base (root body) origin, each |x| ≤ 10⁴.", shape="3", unit="m", frame="world"
+    position_base_in_world: Position3 | None = wire_field(
+        "Base (root body) origin, each |x| ≤ 10⁴. The base is given either by this and the "
+        "next three fields, or by `imu` (then these four are absent).",
+        shape="3",
+        unit="m",
+        frame="world",
+        default=None,
     )
-    orientation_base_in_world_xyzw: QuaternionXYZW = wire_field(
+    orientation_base_in_world_xyzw: QuaternionXYZW | None = wire_field(
         "Base orientation, scalar last; unit length within 10 %, normalised by the server.",
         shape="4",
         frame="world",
+        default=None,
     )
-    linear_velocity_base_in_world: Velocity3 = wire_field(
-        "Velocity of the base origin, each |v| ≤ 1000.", shape="3", unit="m/s", frame="world"
+    linear_velocity_base_in_world: Velocity3 | None = wire_field(
+        "Velocity of the base origin, each |v| ≤ 1000.",
+        shape="3",
+        unit="m/s",
+        frame="world",
+        default=None,
     )
-    angular_velocity_base_in_base: Velocity3 = wire_field(
-        "Base angular velocity, each |ω| ≤ 1000.", shape="3", unit="rad/s", frame="base"
+    angular_velocity_base_in_base: Velocity3 | None = wire_field(
+        "Base angular velocity, each |ω| ≤ 1000.",
+        shape="3",
+        unit="rad/s",
+        frame="base",
+        default=None,
+    )
+    imu: ImuSample | None = wire_field(
+        "Instead of the four base fields: the IMU reading at `time_s` (see the ImuSample "
+        "table); the server estimates the base from it, the joints and `contact_flags`.",
+        default=None,
     )
     contact_flags: list[bool] = wire_field(
         "Per contact (welcome order): is it a support this tick.", shape="contacts"
@@ -311,6 +407,47 @@ class PrioritizedDiagnostics(_Strict):
     )
     inequality_violation: float = wire_field(
         "max(0, −(D x + f)) over λ ≥ 0, non-penetration, torque and joint limits."
+    )
+
+
+class BaseEstimateDiagnostics(_Strict):
+    """The base state the server estimated from ``state.imu`` (contact-aided invariant EKF).
+
+    Roll, pitch, velocity and height are observable while a foot is in stance; yaw and
+    horizontal position are not, and drift (their standard deviations grow to show it).
+    """
+
+    position_base_in_world: FloatArray = wire_field(
+        "Estimated base origin; height relative to the ground under the stance feet when "
+        "the estimator started.",
+        shape="3",
+        unit="m",
+        frame="world",
+    )
+    orientation_base_in_world_xyzw: FloatArray = wire_field(
+        "Estimated base orientation, scalar last.", shape="4", frame="world"
+    )
+    linear_velocity_base_in_world: FloatArray = wire_field(
+        "Estimated base origin velocity.", shape="3", unit="m/s", frame="world"
+    )
+    angular_velocity_base_in_base: FloatArray = wire_field(
+        "Gyroscope less its estimated bias, in base axes.", shape="3", unit="rad/s", frame="base"
+    )
+    gyro_bias_in_imu: FloatArray = wire_field(
+        "Estimated gyroscope bias.", shape="3", unit="rad/s", frame="IMU"
+    )
+    accel_bias_in_imu: FloatArray = wire_field(
+        "Estimated accelerometer bias.", shape="3", unit="m/s²", frame="IMU"
+    )
+    covariance: FloatArray = wire_field(
+        "Covariance of the errors [δθ, δv, δp, δb_g, δb_a] (orientation error in world axes, "
+        "so δθ_z is yaw; velocity and position of the base origin, world; biases, IMU), "
+        "row-major.",
+        shape="15 × 15",
+        unit="rad, m/s, m, rad/s, m/s²",
+    )
+    stance_contacts: list[str] = wire_field(
+        "Contacts whose foot position the filter holds this tick (in stance)."
     )
 
 
@@ -390,6 +527,11 @@ class Diagnostics(_Strict):
     )
     prioritized: PrioritizedDiagnostics | None = wire_field(
         "`prioritized`: see the PrioritizedDiagnostics table; absent otherwise.",
+        default=None,
+    )
+    base_estimate: BaseEstimateDiagnostics | None = wire_field(
+        "When the state carried `imu`: the estimated base (see the BaseEstimateDiagnostics "
+        "table); absent otherwise.",
         default=None,
     )
 

@@ -8,6 +8,7 @@ from controller_server.estimation.estimate import (
     EstimatorPrior,
     ImuMount,
 )
+from controller_server.estimation.imu_base import ImuBaseEstimator, imu_mount
 from controller_server.estimation.leg_kinematics import (
     LegKinematics,
     compute_leg_kinematics,
@@ -20,8 +21,10 @@ __all__ = [
     "EstimatorInputError",
     "EstimatorNoise",
     "EstimatorPrior",
+    "ImuBaseEstimator",
     "ImuMount",
     "LegKinematics",
     "compute_leg_kinematics",
+    "imu_mount",
     "robot_leg_kinematics",
 ]

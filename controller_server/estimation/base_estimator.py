@@ -179,19 +179,26 @@ class BaseEstimator:
         specific_force_imu_in_imu: np.ndarray | None = None,
         orientation_base_in_world_xyzw: np.ndarray | None = None,
         position_base_in_world: np.ndarray | None = None,
+        angular_velocity_imu_in_imu: np.ndarray | None = None,
     ) -> None:
         """Start from a standing pose.
 
         Orientation: given, else levelled on the accelerometer (yaw zero; valid when still).
         Position: given, else ``x = y = 0`` and the height that puts the lowest stance
         contact point on ``z = 0``. Velocity and biases start at zero; every stance contact
-        is added to the state.
+        is added to the state. ``angular_velocity_imu_in_imu`` (the gyro now) gives the
+        first estimate's angular velocity (else zero).
 
         Raises:
             EstimatorInputError: Bad input, or no orientation source or no stance contact to
                 place the base on.
         """
         positions, _, flags = self._check_kinematics(kinematics, contact_flags)
+        gyro = (
+            np.zeros(3)
+            if angular_velocity_imu_in_imu is None
+            else checked_array(angular_velocity_imu_in_imu, "angular_velocity_imu_in_imu", (3,))
+        )
         if orientation_base_in_world_xyzw is not None:
             quaternion = checked_array(
                 orientation_base_in_world_xyzw, "orientation_base_in_world_xyzw", (4,)
@@ -222,6 +229,7 @@ class BaseEstimator:
                 "contact_flags", "no stance contact to place the base on; give a position"
             )
         self.reset()
+        self._gyro_reading = gyro
         self._rotation = rotation_base @ self._rotation_imu_to_base.T
         position_imu = position_base + rotation_base @ self._position_imu_in_base
         self._columns = np.array([np.zeros(3), position_imu])
@@ -366,11 +374,12 @@ class BaseEstimator:
         accelerometer reading and the stance feet (see :meth:`initialize`).
         """
         if not self.initialized:
-            gyro = checked_array(angular_velocity_imu_in_imu, "angular_velocity_imu_in_imu", (3,))
             self.initialize(
-                kinematics, contact_flags, specific_force_imu_in_imu=specific_force_imu_in_imu
+                kinematics,
+                contact_flags,
+                specific_force_imu_in_imu=specific_force_imu_in_imu,
+                angular_velocity_imu_in_imu=angular_velocity_imu_in_imu,
             )
-            self._gyro_reading = gyro
         else:
             self._check_kinematics(kinematics, contact_flags)  # before changing anything
             self.propagate(angular_velocity_imu_in_imu, specific_force_imu_in_imu, dt)

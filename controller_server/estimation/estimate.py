@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller_server.errors import ServerFault
+from controller_server.errors import EstimatorInputError
 from controller_server.estimation.lie import so3_gamma
 
 __all__ = [
@@ -28,10 +28,6 @@ __all__ = [
 
 STANDARD_GRAVITY = 9.80665
 """Standard gravity (m/s²); gravity in the world is in the world is ``(0, 0, −g)``."""
-
-
-class EstimatorInputError(ServerFault, ValueError):
-    """An estimator input is missing, misshapen or not finite; the estimate is unchanged."""
 
 
 @dataclass(frozen=True)

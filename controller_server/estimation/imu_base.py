@@ -1,0 +1,180 @@
+"""A session's base state from the ``imu`` block of its states (server side).
+
+A client without motion capture sends, instead of the base pose and twist, the IMU
+reading of the instant (``state.imu``) with its joints and contact flags. Per session,
+:class:`ImuBaseEstimator` runs the contact-aided invariant EKF
+(:class:`~controller_server.estimation.BaseEstimator`, Hartley et al. 2020) on them:
+propagation over the time since the previous state, the stance feet's kinematics
+(Pinocchio, the session's own model and contacts) as measurements. The IMU's mount comes
+from ``hello`` (``imu_frame`` and offset) and must be rigid on the root body.
+
+Start: the first ``imu`` state (and the first after a restart) initialises the filter,
+the robot standing on at least one flagged foot: orientation from the IMU's own filter
+when the sample carries one (prior roll/pitch σ :data:`AHRS_TILT_PRIOR_RAD`), else levelled
+on the accelerometer with yaw zero (prior σ 2°, a BMI088's zero-g offset is up to 1.1°
+of tilt); height from the lowest stance foot at ``z = 0``, ``x = y = 0``. A gap between
+states longer than :data:`MAX_STATE_GAP_S` cannot be integrated: the filter restarts at
+the next state, and the state of the gap is answered with an error.
+"""
+
+from __future__ import annotations
+
+import difflib
+
+import numpy as np
+import pinocchio as pin
+
+from controller_server.errors import EstimatorInputError, ImuFrameError
+from controller_server.estimation.base_estimator import BaseEstimator
+from controller_server.estimation.estimate import BaseEstimate, EstimatorPrior, ImuMount
+from controller_server.estimation.leg_kinematics import robot_leg_kinematics
+from controller_server.models import RobotModel
+from protocol.messages import Hello, State
+
+__all__ = ["AHRS_TILT_PRIOR_RAD", "MAX_STATE_GAP_S", "ImuBaseEstimator", "imu_mount"]
+
+MAX_STATE_GAP_S = 0.05
+"""Longest time between two ``imu`` states the filter integrates (s); longer restarts it."""
+AHRS_TILT_PRIOR_RAD = float(np.deg2rad(0.5))
+"""Roll/pitch 1σ of an orientation from the IMU's own filter (AHRS data sheets give
+0.2–0.5° static roll/pitch accuracy)."""
+
+_WIRE_FIELDS = {
+    "angular_velocity_imu_in_imu": "imu.angular_velocity_imu_in_imu",
+    "specific_force_imu_in_imu": "imu.linear_acceleration_imu_in_imu",
+    "orientation_base_in_world_xyzw": "imu.orientation_imu_in_world_xyzw",
+    "dt": "time_s",
+    "kinematics.position_points_in_base": "joint_position",
+    "kinematics.jacobians": "joint_position",
+}
+"""The estimator's input names → the ``state`` fields they come from."""
+
+
+def imu_mount(robot: RobotModel, hello: Hello) -> ImuMount:
+    """Where the IMU sits on the base, from ``hello``'s frame and offset.
+
+    Raises:
+        ImuFrameError: The frame is unknown (the message suggests the closest) or moves
+            relative to the root body.
+    """
+    model = robot.model
+    offset = pin.SE3(
+        pin.Quaternion(np.array(hello.imu_orientation_in_frame_xyzw, dtype=float))
+        .normalized()
+        .toRotationMatrix(),
+        np.array(hello.imu_position_in_frame, dtype=float),
+    )
+    if hello.imu_frame is None:
+        return ImuMount(offset.rotation, offset.translation)
+    names = [frame.name for frame in model.frames if frame.name not in ("universe", "root_joint")]
+    if hello.imu_frame not in names:
+        close = difflib.get_close_matches(hello.imu_frame, names, n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise ImuFrameError(
+            "imu_frame",
+            f"{robot.name} has no frame {hello.imu_frame!r}; {hint}frames on the root body: "
+            + ", ".join(f.name for f in model.frames if f.parentJoint == 1),
+        )
+    frame = model.frames[model.getFrameId(hello.imu_frame)]
+    if frame.parentJoint != 1:
+        raise ImuFrameError(
+            "imu_frame",
+            f"frame {hello.imu_frame!r} moves relative to the root body (joint "
+            f"{model.names[frame.parentJoint]!r} between them): mount the IMU on the root body",
+        )
+    mount = frame.placement * offset
+    return ImuMount(mount.rotation.copy(), mount.translation.copy())
+
+
+class ImuBaseEstimator:
+    """One session's base estimator: ``state.imu`` + joints + contacts → base estimate.
+
+    Call it with each state carrying ``imu`` (joints and contact flags already checked
+    against the robot); errors leave the filter as it was, except a gap (see the module).
+    """
+
+    def __init__(self, robot: RobotModel, hello: Hello):
+        """Set up the filter for ``robot`` with the IMU mount of ``hello``.
+
+        Raises:
+            ImuFrameError: See :func:`imu_mount`.
+        """
+        self.robot = robot
+        self._data = robot.model.createData()
+        self.mount = imu_mount(robot, hello)
+        self.estimator = BaseEstimator(
+            [contact.name for contact in robot.contacts],
+            imu_mount=self.mount,
+            max_time_step_s=MAX_STATE_GAP_S,
+        )
+        self._level_prior = self.estimator.prior
+        self._ahrs_prior = EstimatorPrior(roll_pitch_rad=AHRS_TILT_PRIOR_RAD)
+        self._time_s = 0.0
+
+    def __call__(self, state: State) -> BaseEstimate:
+        """The base estimate at ``state.time_s``.
+
+        Raises:
+            EstimatorInputError: Naming the ``state`` field: time not advancing or a gap
+                (then the filter restarts at the next state), no foot in stance at the
+                start, or a reading the filter refuses.
+        """
+        imu = state.imu
+        assert imu is not None
+        joint_position = pin.normalize(
+            self.robot.model, np.concatenate([[0, 0, 0, 0, 0, 0, 1.0], state.joint_position])
+        )[7:]
+        kinematics = robot_leg_kinematics(self.robot, self._data, joint_position)
+        estimator = self.estimator
+        try:
+            if not estimator.initialized:
+                self._initialize(state, kinematics)
+            else:
+                dt = state.time_s - self._time_s
+                if dt > MAX_STATE_GAP_S:
+                    estimator.reset()
+                    raise EstimatorInputError(
+                        "dt",
+                        f"{dt * 1e3:.0f} ms since the previous state, more than "
+                        f"{MAX_STATE_GAP_S * 1e3:.0f} ms: the base estimator restarts at the "
+                        "next state (the robot should then stand still on its flagged feet)",
+                    )
+                if not dt > 0:
+                    raise EstimatorInputError(
+                        "dt", f"time_s {state.time_s} does not advance from {self._time_s}"
+                    )
+                estimator.step(
+                    imu.angular_velocity_imu_in_imu,
+                    imu.linear_acceleration_imu_in_imu,
+                    dt,
+                    kinematics,
+                    state.contact_flags,
+                )
+        except EstimatorInputError as error:
+            field = _WIRE_FIELDS.get(error.field, error.field)
+            raise EstimatorInputError(field, error.detail) from None
+        self._time_s = state.time_s
+        return estimator.estimate()
+
+    def _initialize(self, state: State, kinematics) -> None:
+        imu = state.imu
+        assert imu is not None
+        estimator = self.estimator
+        if imu.orientation_imu_in_world_xyzw is None:
+            estimator.prior = self._level_prior
+            estimator.initialize(
+                kinematics,
+                state.contact_flags,
+                specific_force_imu_in_imu=imu.linear_acceleration_imu_in_imu,
+                angular_velocity_imu_in_imu=imu.angular_velocity_imu_in_imu,
+            )
+            return
+        rotation_imu = pin.Quaternion(imu.orientation_imu_in_world_xyzw).normalized()
+        rotation_base = rotation_imu.toRotationMatrix() @ self.mount.rotation_imu_to_base.T
+        estimator.prior = self._ahrs_prior
+        estimator.initialize(
+            kinematics,
+            state.contact_flags,
+            orientation_base_in_world_xyzw=pin.Quaternion(rotation_base).coeffs(),
+            angular_velocity_imu_in_imu=imu.angular_velocity_imu_in_imu,
+        )
