@@ -268,6 +268,9 @@ class ControllerClient:
         expected_model_hash: str | None = None,
         client_name: str = "",
         diagnostics_period_ticks: int = 1,
+        imu_frame: str | None = None,
+        imu_position_in_frame: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        imu_orientation_in_frame_xyzw: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0),
     ) -> Welcome:
         """Open a session (``hello`` → ``welcome``); see :class:`protocol.Hello`.
 
@@ -285,6 +288,9 @@ class ControllerClient:
             expected_model_hash=expected_model_hash,
             client_name=client_name,
             diagnostics_period_ticks=diagnostics_period_ticks,
+            imu_frame=imu_frame,
+            imu_position_in_frame=imu_position_in_frame,
+            imu_orientation_in_frame_xyzw=imu_orientation_in_frame_xyzw,
         )
         return self._handshake()
 

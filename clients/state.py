@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 
 from clients.layout import neutral_joint_position
-from protocol.messages import Command, State, Welcome
+from protocol.messages import Command, ImuSample, State, Welcome
 
 __all__ = ["RobotState"]
 
@@ -60,6 +60,29 @@ class RobotState:
             orientation_base_in_world_xyzw=self.orientation_base_in_world_xyzw,
             linear_velocity_base_in_world=self.linear_velocity_base_in_world,
             angular_velocity_base_in_base=self.angular_velocity_base_in_base,
+            contact_flags=contact_flags,
+            contact_wrench_in_world=(
+                None if contact_wrench_in_world is None else contact_wrench_in_world.reshape(-1)
+            ),
+        )
+
+    def to_imu_message(
+        self,
+        time_s: float,
+        contact_flags: list[bool],
+        imu: ImuSample,
+        contact_wrench_in_world: np.ndarray | None = None,
+    ) -> State:
+        """The ``state`` message with the joints of this state and the base as an IMU reading.
+
+        The base fields of this state are not sent (the server estimates them from
+        ``imu``); like :meth:`to_message`, built without validation.
+        """
+        return State.model_construct(
+            time_s=time_s,
+            joint_position=self.joint_position,
+            joint_velocity=self.joint_velocity,
+            imu=imu,
             contact_flags=contact_flags,
             contact_wrench_in_world=(
                 None if contact_wrench_in_world is None else contact_wrench_in_world.reshape(-1)

@@ -171,6 +171,19 @@ class ImuSpec(BaseModel):
         default=None,
         description="Initial accelerometer bias in the IMU frame (m/s²), instead of a draw.",
     )
+    orientation_output: bool = Field(
+        default=True,
+        description="Whether the sensor also outputs its orientation from an onboard filter "
+        "(an AHRS; the BMI088 alone has none). It is the truth turned by a fixed tilt error.",
+    )
+    orientation_tilt_error_rad: float = Field(
+        default=math.radians(0.5),
+        ge=0.0,
+        le=math.radians(45.0),
+        description="RMS tilt (roll/pitch) error of that orientation (rad), drawn once per "
+        "reset. Default: 0.5°, the static roll/pitch accuracy of the Xsens MTi (MTi and MTx "
+        "User Manual MT0100P, section 4.2).",
+    )
     seed: int = Field(default=0, ge=0, description="Seed of the noise and bias draws.")
 
     @field_validator("orientation_in_body_xyzw")
@@ -208,6 +221,7 @@ class ImuSpec(BaseModel):
             "accel_bias_random_walk_m_per_s3_sqrt_hz": 0.0,
             "gyro_initial_bias_std_rad_per_s": 0.0,
             "accel_initial_bias_std_m_per_s2": 0.0,
+            "orientation_tilt_error_rad": 0.0,
         }
         for bias, std in (
             ("gyro_initial_bias_rad_per_s", "gyro_initial_bias_std_rad_per_s"),
@@ -233,8 +247,9 @@ class ImuSpec(BaseModel):
 class ImuReading:
     """One IMU sample: what the sensor outputs, and the truth behind it.
 
-    Only ``time_s``, ``angular_velocity_imu_in_imu`` and
-    ``linear_acceleration_imu_in_imu`` are what a real IMU gives; the
+    Only ``time_s``, ``angular_velocity_imu_in_imu``,
+    ``linear_acceleration_imu_in_imu`` and ``orientation_imu_in_world_xyzw``
+    are what a real IMU gives; the
     ``true_*`` fields are simulator ground truth for tests and for grading
     an estimator, never for feeding it.
 
@@ -243,6 +258,8 @@ class ImuReading:
         angular_velocity_imu_in_imu: Gyroscope output, IMU axes (rad/s).
         linear_acceleration_imu_in_imu: Accelerometer output: specific force
             ``a − g`` of the IMU point, IMU axes (m/s²; +9.81 up at rest).
+        orientation_imu_in_world_xyzw: The onboard filter's orientation output
+            (``None`` without ``orientation_output``).
         true_angular_velocity_imu_in_imu: The gyroscope's truth, averaged
             over the sample (rad/s).
         true_linear_acceleration_imu_in_imu: The accelerometer's truth,
@@ -258,6 +275,7 @@ class ImuReading:
     time_s: float
     angular_velocity_imu_in_imu: np.ndarray
     linear_acceleration_imu_in_imu: np.ndarray
+    orientation_imu_in_world_xyzw: np.ndarray | None
     true_angular_velocity_imu_in_imu: np.ndarray
     true_linear_acceleration_imu_in_imu: np.ndarray
     true_angular_velocity_bias_in_imu: np.ndarray
@@ -378,7 +396,9 @@ class SimulatedImu:
     def reset(self, state: RobotState, time_s: float = 0.0) -> None:
         """Start over at ``state``: re-seed, draw the initial biases, drop the samples.
 
-        The first sample is due ``1 / rate_hz`` after ``time_s``.
+        The sensor outputs one sample at once, of ``state`` at rest (zero acceleration;
+        :meth:`reading`), so that a client has a reading for its first state. The next
+        sample is due ``1 / rate_hz`` after ``time_s``.
         """
         spec = self.spec
         self._rng = np.random.default_rng(spec.seed)
@@ -392,14 +412,19 @@ class SimulatedImu:
             if spec.accel_initial_bias_m_per_s2 is not None
             else spec.accel_initial_bias_std_m_per_s2 * self._rng.standard_normal(3)
         )
+        # The onboard filter's fixed tilt error: its own stream, so the noise stays as it was.
+        tilt = np.random.default_rng((spec.seed, 1)).standard_normal(2)
+        tilt *= spec.orientation_tilt_error_rad / math.sqrt(2.0)
+        self._orientation_error = pin.exp3(np.array([tilt[0], tilt[1], 0.0]))
         self._time_s = float(time_s)
         self._start_s = float(time_s)
         self._samples = 0
-        self._window_s = 0.0
-        self._angular_sum = np.zeros(3)
-        self._specific_force_sum = np.zeros(3)
-        self._reading = None
         self._kinematics = self._frame_kinematics(state)
+        rotation, _, _, angular_velocity = self._kinematics
+        self._window_s = 1.0  # the sample at rest: its averages are the values now
+        self._angular_sum = angular_velocity.copy()
+        self._specific_force_sum = -rotation.T @ self.gravity_in_world_m_per_s2
+        self._reading = self._sample()
         self._started = True
 
     def update(self, state: RobotState, time_s: float) -> ImuReading | None:
@@ -512,10 +537,14 @@ class SimulatedImu:
         self._angular_sum = np.zeros(3)
         self._specific_force_sum = np.zeros(3)
         rotation, position, velocity, _ = self._kinematics
+        orientation = None
+        if self.spec.orientation_output:
+            orientation = pin.Quaternion(self._orientation_error @ rotation).coeffs().copy()
         return ImuReading(
             time_s=self._time_s,
             angular_velocity_imu_in_imu=true_angular + gyro_bias + gyro_noise,
             linear_acceleration_imu_in_imu=true_specific_force + accel_bias + accel_noise,
+            orientation_imu_in_world_xyzw=orientation,
             true_angular_velocity_imu_in_imu=true_angular,
             true_linear_acceleration_imu_in_imu=true_specific_force,
             true_angular_velocity_bias_in_imu=gyro_bias,

@@ -495,7 +495,6 @@ def test_misuse_is_refused_with_what_to_do():
     with pytest.raises(RuntimeError, match="reset"):
         imu.update(state, 0.001)
     imu.reset(state, 0.0)
-    assert imu.reading() is None
     with pytest.raises(ValueError, match="must advance"):
         imu.update(state, 0.0)
     with pytest.raises(ValueError, match="must not exceed the physics rate"):
@@ -503,3 +502,29 @@ def test_misuse_is_refused_with_what_to_do():
     state.joint_position = state.joint_position[:-1]
     with pytest.raises(ValueError, match="coordinates"):
         imu.update(state, 0.001)
+
+
+def test_reset_outputs_a_sample_at_rest_and_the_filter_orientation_has_the_tilt_error():
+    """The first sample (at reset) reads gravity; the AHRS orientation is off by the spec's tilt."""
+    state = ReferenceBackend("thesis_humanoid").standing_state()
+    tilts = []
+    for seed in range(200):
+        imu = SimulatedImu(
+            ImuSpec.ideal(orientation_tilt_error_rad=0.01, seed=seed), "thesis_humanoid"
+        )
+        imu.reset(state, 2.0)
+        reading = imu.reading()
+        assert reading is not None and reading.time_s == 2.0
+        np.testing.assert_allclose(reading.linear_acceleration_imu_in_imu, [0, 0, 9.81], atol=1e-9)
+        np.testing.assert_allclose(reading.angular_velocity_imu_in_imu, 0.0, atol=1e-12)
+        error = pin.Quaternion(reading.orientation_imu_in_world_xyzw).toRotationMatrix()
+        error = (
+            error @ pin.Quaternion(reading.true_orientation_imu_in_world_xyzw).toRotationMatrix().T
+        )
+        axis_angle = pin.log3(error)
+        assert abs(axis_angle[2]) < 1e-12  # a tilt: no heading error
+        tilts.append(np.linalg.norm(axis_angle))
+    assert np.sqrt(np.mean(np.square(tilts))) == pytest.approx(0.01, rel=0.1)
+    no_output = SimulatedImu(ImuSpec(orientation_output=False), "thesis_humanoid")
+    no_output.reset(state)
+    assert no_output.reading().orientation_imu_in_world_xyzw is None
