@@ -64,6 +64,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from clients.sim.model_file import body_names, resolve_model_path
 from clients.sim.reference import BodyNotFound, mjcf_gravity_in_world
 from clients.state import RobotState
+from protocol.messages import ImuSample
 
 __all__ = [
     "BMI088_ACCEL_NOISE_DENSITY_M_PER_S2_SQRT_HZ",
@@ -283,6 +284,14 @@ class ImuReading:
     true_orientation_imu_in_world_xyzw: np.ndarray
     true_position_imu_in_world: np.ndarray
     true_linear_velocity_imu_in_world: np.ndarray
+
+    def to_sample(self) -> ImuSample:
+        """The wire's ``state.imu``: what the sensor outputs (no truth), unvalidated."""
+        return ImuSample.model_construct(
+            angular_velocity_imu_in_imu=self.angular_velocity_imu_in_imu,
+            linear_acceleration_imu_in_imu=self.linear_acceleration_imu_in_imu,
+            orientation_imu_in_world_xyzw=self.orientation_imu_in_world_xyzw,
+        )
 
 
 def add_imu_frame(model: pin.Model, spec: ImuSpec, path: Path) -> int:

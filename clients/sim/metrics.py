@@ -12,7 +12,7 @@ from clients.layout import joint_slices
 from clients.sim.model_file import resolve_model_path
 from clients.sim.runner import RunRecord
 
-__all__ = ["JOINT_GROUPS", "compute_metrics", "strictly_inside"]
+__all__ = ["JOINT_GROUPS", "base_estimate_errors", "compute_metrics", "strictly_inside"]
 
 JOINT_GROUPS = {
     "legs": ("hip", "knee", "ankle"),
@@ -98,6 +98,44 @@ def _foot_slip_and_rotation(record: RunRecord) -> tuple[float, float]:
     return slip_m, rotation_rad
 
 
+def base_estimate_errors(record: RunRecord) -> dict[str, float]:
+    """How far the server's base estimate (``base_state = "imu"``) was from the simulator's truth.
+
+    Over the ticks whose diagnostics carry ``base_estimate``, each against the true state
+    sent at that tick: the tilt error (angle between the true and estimated up axes in the
+    base frame: roll and pitch, not yaw), its largest and RMS value; the base velocity error
+    (norm, world) RMS; the largest base height error; and the yaw error at the end (yaw is
+    unobservable: it drifts). Empty when no tick has an estimate.
+    """
+    tilt_deg, velocity_m_per_s, height_m, yaw_deg = [], [], [], []
+    for state, command in zip(record.states, record.commands, strict=True):
+        estimate = None if command.diagnostics is None else command.diagnostics.base_estimate
+        if estimate is None:
+            continue
+        rotation_true = Rotation.from_quat(state.orientation_base_in_world_xyzw)
+        rotation_estimated = Rotation.from_quat(estimate.orientation_base_in_world_xyzw)
+        up_true = rotation_true.inv().apply([0.0, 0.0, 1.0])
+        up_estimated = rotation_estimated.inv().apply([0.0, 0.0, 1.0])
+        cosine = np.clip(float(up_true @ up_estimated), -1.0, 1.0)
+        tilt_deg.append(np.degrees(np.arccos(cosine)))
+        velocity_error = (
+            estimate.linear_velocity_base_in_world - state.linear_velocity_base_in_world
+        )
+        velocity_m_per_s.append(float(np.linalg.norm(velocity_error)))
+        height_m.append(estimate.position_base_in_world[2] - state.position_base_in_world[2])
+        yaw_deg.append(np.degrees((rotation_estimated * rotation_true.inv()).as_rotvec()[2]))
+    if not tilt_deg:
+        return {}
+    tilt, velocity = np.array(tilt_deg), np.array(velocity_m_per_s)
+    return {
+        "tilt_error_max_deg": float(tilt.max()),
+        "tilt_error_rms_deg": float(np.sqrt(np.mean(tilt**2))),
+        "velocity_error_rms_m_per_s": float(np.sqrt(np.mean(velocity**2))),
+        "height_error_max_m": float(np.max(np.abs(height_m))),
+        "yaw_error_end_deg": float(yaw_deg[-1]),
+    }
+
+
 def compute_metrics(record: RunRecord) -> dict[str, Any]:
     """The run's report: fall, CM excursion, tracking RMS, COP margin, foot slip, torques, speed.
 
@@ -128,6 +166,7 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
     ]
     errors = _joint_errors_rad(record)
     slip_m, rotation_rad = _foot_slip_and_rotation(record)
+    estimation = base_estimate_errors(record)
     return {
         **outcome,
         "com_excursion_m": float(np.max(np.linalg.norm(com[:, :2] - com[0, :2], axis=1))),
@@ -143,4 +182,5 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
         "server_compute_p50_ms": float(
             np.percentile([d.compute_time_s for d in diagnostics], 50) * 1e3
         ),
+        **({"base_estimate_error": estimation} if estimation else {}),
     }

@@ -33,6 +33,7 @@ from clients.client import ControllerClient, CurveKeys, ServerError, ServerTimeo
 from clients.layout import joint_slices, neutral_joint_position
 from clients.sim.backend import PhysicsBackend, Push
 from clients.sim.errors import ScenarioError
+from clients.sim.imu import SimulatedImu
 from clients.sim.model_file import hello_model, resolve_model_path
 from clients.sim.scenario import Scenario
 from clients.state import RobotState
@@ -181,12 +182,22 @@ def support_flags(
 
 
 def _step_physics(
-    backend: PhysicsBackend, joint_torque: np.ndarray, pushes: list[Push], steps: int
+    backend: PhysicsBackend,
+    joint_torque: np.ndarray,
+    pushes: list[Push],
+    steps: int,
+    imu: SimulatedImu | None,
 ) -> bool:
-    """Hold ``joint_torque`` for ``steps`` physics steps; True if a non-foot body touched."""
+    """Hold ``joint_torque`` for ``steps`` physics steps (the IMU sees each one).
+
+    Returns:
+        True if a non-foot body touched the ground.
+    """
     non_foot_contact = False
     for _ in range(steps):
         non_foot_contact |= backend.step(joint_torque, pushes).non_foot_contact
+        if imu is not None:
+            imu.update(backend.state(), backend.time_s)
     return non_foot_contact
 
 
@@ -211,6 +222,16 @@ def run_scenario(
     backend = make_backend(scenario)
     pushes = [push.to_push() for push in scenario.pushes]
     measured = scenario.ground_force_mode == "measured"
+    imu = None
+    imu_mount: dict[str, Any] = {}
+    if scenario.base_state == "imu":
+        spec = scenario.imu.model_copy(update={"rate_hz": scenario.control_rate_hz})
+        imu = SimulatedImu(spec, scenario.model)
+        imu_mount = {
+            "imu_frame": imu.body_name,
+            "imu_position_in_frame": spec.position_in_body_m,
+            "imu_orientation_in_frame_xyzw": spec.orientation_in_body_xyzw,
+        }
     with ControllerClient(endpoint, timeout_s=timeout_s, curve=curve, record=log_path) as client:
         welcome = client.connect(
             **hello_model(scenario.model),
@@ -219,8 +240,11 @@ def run_scenario(
             params={**scenario.params, **({"ground_force_mode": "measured"} if measured else {})},
             client_name=f"poise sim {scenario.name}",
             diagnostics_period_ticks=scenario.diagnostics_period_ticks,
+            **imu_mount,
         )
         backend.reset(standing_state(welcome, scenario.initial_joint_position))
+        if imu is not None:
+            imu.reset(backend.state(), backend.time_s)
         standing_height_m = welcome.standing_position_base_in_world[2]
         record = RunRecord(scenario, welcome)
         ticks = round(scenario.duration_s * scenario.control_rate_hz)
@@ -256,15 +280,19 @@ def run_scenario(
                     sent = state.predicted(period_s, model, held_command)
                     sent_time_s += period_s
                 try:
-                    client.send_state(sent.to_message(sent_time_s, flags, wrenches))
+                    if imu is None:
+                        client.send_state(sent.to_message(sent_time_s, flags, wrenches))
+                    else:  # the joints, and the IMU for the base (sampled at this tick)
+                        sample = imu.reading().to_sample()  # type: ignore[union-attr]
+                        client.send_state(sent.to_imu_message(sent_time_s, flags, sample, wrenches))
                     if held_command is None or not scenario.command_delay_ticks:
                         command = client.receive_command()
                         non_foot_contact = _step_physics(
-                            backend, command.joint_torque, pushes, steps
+                            backend, command.joint_torque, pushes, steps, imu
                         )
                     else:  # the physics runs while the server computes this state's command
                         non_foot_contact = _step_physics(
-                            backend, held_command.joint_torque, pushes, steps
+                            backend, held_command.joint_torque, pushes, steps, imu
                         )
                         command = client.receive_command()
                     held_command = command

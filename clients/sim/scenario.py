@@ -20,6 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from clients.sim.backend import Push
 from clients.sim.errors import ScenarioError, ScenarioNotFound
+from clients.sim.imu import ImuSpec
 from clients.sim.model_file import body_names, resolve_model_path
 
 __all__ = [
@@ -101,6 +102,17 @@ class Scenario(BaseModel):
         description="A touching foot becomes a support once its normal force exceeds this (N); "
         "it stays one until it lifts off.",
     )
+    base_state: Literal["truth", "imu"] = Field(
+        default="truth",
+        description="How the client gives the base: `truth`, the simulator's base pose and "
+        "twist; `imu`, the readings of a simulated IMU (the `imu` table), from which the server "
+        "estimates the base (its contact-aided EKF: docs/estimation.md).",
+    )
+    imu: ImuSpec = Field(
+        default_factory=ImuSpec,
+        description='The simulated IMU of `base_state = "imu"`: mounting and errors '
+        "(BMI088 defaults); it samples once per control tick.",
+    )
     initial_joint_position: dict[str, list[float]] = Field(
         default_factory=dict, description="Joint name → position (rad; ball: xyzw) at t = 0."
     )
@@ -116,6 +128,20 @@ class Scenario(BaseModel):
             raise ValueError(
                 f"physics_rate_hz ({self.physics_rate_hz}) must be a whole multiple of "
                 f"control_rate_hz ({self.control_rate_hz})"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _imu(self) -> Scenario:
+        if "rate_hz" in self.imu.model_fields_set and self.imu.rate_hz != self.control_rate_hz:
+            raise ValueError(
+                f"imu.rate_hz ({self.imu.rate_hz:g}) must equal control_rate_hz "
+                f"({self.control_rate_hz:g}), one sample per state; or leave it out"
+            )
+        if self.base_state == "imu" and self.command_delay_ticks:
+            raise ValueError(
+                'base_state = "imu" needs command_delay_ticks = 0: a delayed command is '
+                "computed for a predicted state, which needs the base the server estimates"
             )
         return self
 

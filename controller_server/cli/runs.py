@@ -25,6 +25,8 @@ def _sim(args: argparse.Namespace) -> int:
         overrides["backend"] = args.backend
     if args.controller:
         overrides["controller"] = args.controller
+    if args.base_state:
+        overrides["base_state"] = args.base_state
     check_endpoint_option("--connect", args.connect)
     curve = curve_keys(args)
     if not args.sweep_push:
@@ -93,6 +95,13 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         "--controller",
         choices=CONTROLLER_NAMES,
         help="controller for every scenario (default: each scenario's own)",
+    )
+    sim.add_argument(
+        "--base-state",
+        choices=["truth", "imu"],
+        help="how the base reaches the server for every scenario: the simulator's truth, or a "
+        "simulated IMU's readings that the server estimates it from (default: each "
+        "scenario's own)",
     )
     sim.add_argument(
         "--output",

@@ -316,6 +316,22 @@ class BaseEstimator:
             if in_stance and k not in self._stance:
                 self._add_contact(k, *measured[k])
 
+    def forget_contacts(self, contacts: Sequence[int]) -> None:
+        """Marginalise these contacts (indices in ``contact_names``) if in stance.
+
+        The next :meth:`correct` that flags them adds them afresh, at the point its
+        kinematics then give: for a foot whose point on the ground changed (a foot that
+        rolled onto an edge), the old point is no longer the one standing still.
+        """
+        kept = [i for i, k in enumerate(self._stance) if k not in set(contacts)]
+        if len(kept) < len(self._stance):
+            self._keep_contacts(kept)
+
+    @property
+    def rotation_base_in_world(self) -> np.ndarray:
+        """``R_WB`` now (identity before :meth:`initialize`)."""
+        return self._rotation @ self._rotation_imu_to_base.T
+
     def _keep_contacts(self, kept: list[int]) -> None:
         index = np.r_[0:15, [15 + 3 * i + j for i in kept for j in range(3)]].astype(int)
         self._covariance = self._covariance[np.ix_(index, index)]

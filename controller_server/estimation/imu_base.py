@@ -27,7 +27,7 @@ import pinocchio as pin
 from controller_server.errors import EstimatorInputError, ImuFrameError
 from controller_server.estimation.base_estimator import BaseEstimator
 from controller_server.estimation.estimate import BaseEstimate, EstimatorPrior, ImuMount
-from controller_server.estimation.leg_kinematics import robot_leg_kinematics
+from controller_server.estimation.leg_kinematics import grounded_leg_kinematics
 from controller_server.models import RobotModel
 from protocol.messages import Hello, State
 
@@ -110,6 +110,7 @@ class ImuBaseEstimator:
         self._level_prior = self.estimator.prior
         self._ahrs_prior = EstimatorPrior(roll_pitch_rad=AHRS_TILT_PRIOR_RAD)
         self._time_s = 0.0
+        self._corners: list[tuple[int, ...]] = []
 
     def __call__(self, state: State) -> BaseEstimate:
         """The base estimate at ``state.time_s``.
@@ -124,8 +125,10 @@ class ImuBaseEstimator:
         joint_position = pin.normalize(
             self.robot.model, np.concatenate([[0, 0, 0, 0, 0, 0, 1.0], state.joint_position])
         )[7:]
-        kinematics = robot_leg_kinematics(self.robot, self._data, joint_position)
         estimator = self.estimator
+        kinematics, corners = grounded_leg_kinematics(
+            self.robot, self._data, joint_position, estimator.rotation_base_in_world
+        )
         try:
             if not estimator.initialized:
                 self._initialize(state, kinematics)
@@ -143,6 +146,10 @@ class ImuBaseEstimator:
                     raise EstimatorInputError(
                         "dt", f"time_s {state.time_s} does not advance from {self._time_s}"
                     )
+                # A foot whose corners on the ground changed stands on another point now.
+                estimator.forget_contacts(
+                    [k for k, used in enumerate(corners) if used != self._corners[k]]
+                )
                 estimator.step(
                     imu.angular_velocity_imu_in_imu,
                     imu.linear_acceleration_imu_in_imu,
@@ -154,6 +161,7 @@ class ImuBaseEstimator:
             field = _WIRE_FIELDS.get(error.field, error.field)
             raise EstimatorInputError(field, error.detail) from None
         self._time_s = state.time_s
+        self._corners = corners
         return estimator.estimate()
 
     def _initialize(self, state: State, kinematics) -> None:
