@@ -230,7 +230,7 @@ class BaseEstimator:
             )
         self.reset()
         self._gyro_reading = gyro
-        self._rotation = rotation_base @ self._rotation_imu_to_base.T
+        self._rotation = rotation_base @ self._rotation_imu_to_base  # R_WI = R_WB R_BI
         position_imu = position_base + rotation_base @ self._position_imu_in_base
         self._columns = np.array([np.zeros(3), position_imu])
         prior = self.prior

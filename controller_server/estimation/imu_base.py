@@ -127,7 +127,11 @@ class ImuBaseEstimator:
         )[7:]
         estimator = self.estimator
         kinematics, corners = grounded_leg_kinematics(
-            self.robot, self._data, joint_position, estimator.rotation_base_in_world
+            self.robot,
+            self._data,
+            joint_position,
+            estimator.rotation_base_in_world,
+            self._corners if estimator.initialized else (),
         )
         try:
             if not estimator.initialized:

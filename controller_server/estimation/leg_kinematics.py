@@ -115,7 +115,11 @@ def robot_leg_kinematics(robot, data: pin.Data, joint_position: np.ndarray) -> L
 
 
 def grounded_leg_kinematics(
-    robot, data: pin.Data, joint_position: np.ndarray, rotation_base_in_world: np.ndarray
+    robot,
+    data: pin.Data,
+    joint_position: np.ndarray,
+    rotation_base_in_world: np.ndarray,
+    previous: Sequence[tuple[int, ...]] = (),
 ) -> tuple[LegKinematics, list[tuple[int, ...]]]:
     """One point per contact: the centroid of its corners on the ground, and their Jacobian.
 
@@ -124,13 +128,18 @@ def grounded_leg_kinematics(
     while the sole centre rises and moves. The corners on the ground are those within
     :data:`GROUNDED_TOLERANCE_M` of the foot's lowest corner in the world's vertical, from
     the estimated base orientation (a 0.5° error moves a 20 cm sole's ends by 1.7 mm).
-    The Jacobian of the centroid is the mean of the corners' Jacobians.
+    A foot keeps its ``previous`` corners while they all stay within twice that (a foot
+    that rolled onto its edge and back is still standing on that edge): each change of
+    corners costs the filter that foot's history, and a foot near the threshold would
+    otherwise flicker between two sets. The Jacobian of the centroid is the mean of the
+    corners' Jacobians.
 
     Args:
         robot: A :class:`controller_server.models.RobotModel`.
         data: ``pin.Data`` of ``robot.model`` (overwritten).
         joint_position: ``(robot.nq_joints,)`` joint positions in wire order.
         rotation_base_in_world: ``R_WB`` estimated.
+        previous: The corners each contact used last time (empty: none).
 
     Returns:
         The points and Jacobians in ``robot.contacts`` order, and per contact the indices
@@ -148,8 +157,13 @@ def grounded_leg_kinematics(
     for contact in robot.contacts:
         rows = slice(start, start + len(contact.points_in_frame))
         start = rows.stop
-        low = heights[rows] <= heights[rows].min() + GROUNDED_TOLERANCE_M
-        chosen = tuple(int(i) for i in np.flatnonzero(low))
+        height = heights[rows] - heights[rows].min()
+        kept = previous[len(used)] if len(previous) > len(used) else ()
+        if kept and np.all(height[list(kept)] <= 2 * GROUNDED_TOLERANCE_M):
+            chosen = kept
+        else:
+            chosen = tuple(int(i) for i in np.flatnonzero(height <= GROUNDED_TOLERANCE_M))
+        low = list(chosen)
         positions.append(corners.position_points_in_base[rows][low].mean(axis=0))
         jacobians.append(corners.jacobians[rows][low].mean(axis=0))
         used.append(chosen)

@@ -304,6 +304,32 @@ def test_initialises_level_from_the_accelerometer_with_feet_on_the_ground():
     np.testing.assert_allclose(estimate.linear_velocity_base_in_world, 0.0, atol=1e-9)
 
 
+@pytest.mark.parametrize("given_orientation", [False, True])
+def test_a_turned_mount_starts_at_the_base_orientation(given_orientation):
+    """A mount that is not its own inverse (MOUNT is: π about x, then z) maps R_WI = R_WB R_BI."""
+    mount = ImuMount(rotation_imu_to_base=_rz(np.pi / 2) @ _rx(0.3))
+    rotation_base = _rz(0.4) @ _ry(0.1) @ _rx(-0.15) if given_orientation else _ry(0.1)
+    rotation_imu = rotation_base @ mount.rotation_imu_to_base
+    feet = (FEET_IN_WORLD - np.array([0.0, 0.0, 0.87])) @ rotation_base
+    kinematics = LegKinematics(feet, np.repeat(LEG_JACOBIAN[None], 2, 0))
+    estimator = BaseEstimator(["left", "right"], imu_mount=mount)
+    if given_orientation:
+        quaternion = pin.Quaternion(rotation_base).coeffs()
+        estimator.initialize(kinematics, [1, 1], orientation_base_in_world_xyzw=quaternion)
+    else:
+        estimator.initialize(
+            kinematics, [1, 1], specific_force_imu_in_imu=rotation_imu.T @ -GRAVITY
+        )
+    estimate = estimator.estimate()
+    rotation_est = pin.Quaternion(estimate.orientation_base_in_world_xyzw).toRotationMatrix()
+    np.testing.assert_allclose(rotation_est, rotation_base, atol=1e-9)
+    np.testing.assert_allclose(estimator.rotation_base_in_world, rotation_base, atol=1e-9)
+    # One still step: gravity as measured in the turned IMU keeps the estimate where it is.
+    estimate = estimator.step(np.zeros(3), rotation_imu.T @ -GRAVITY, 0.002, kinematics, [1, 1])
+    rotation_est = pin.Quaternion(estimate.orientation_base_in_world_xyzw).toRotationMatrix()
+    np.testing.assert_allclose(rotation_est, rotation_base, atol=1e-6)
+
+
 def test_nan_and_misshapen_inputs_raise_typed_errors_naming_the_field():
     estimator = BaseEstimator(["left", "right"], imu_mount=MOUNT)
     gyro, accel = exact_imu(0.0)
