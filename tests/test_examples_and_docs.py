@@ -68,10 +68,16 @@ def test_readme_documents_every_scenario_key_and_builtin_scenario():
 
 
 def test_bridge_doc_documents_every_key_of_the_actuator_map():
-    from clients.bridge.config import BridgeSettings, BusSpec, EmulationSpec, JointActuator
+    from clients.bridge.config import (
+        BridgeSettings,
+        BusSpec,
+        EmulationSpec,
+        ImuSettings,
+        JointActuator,
+    )
 
     doc = (ROOT / "docs" / "bridge.md").read_text()
-    for model in (BridgeSettings, BusSpec, JointActuator, EmulationSpec):
+    for model in (BridgeSettings, BusSpec, JointActuator, ImuSettings, EmulationSpec):
         for key in model.model_fields:
             assert f"| `{key}` |" in doc, key
 

@@ -21,14 +21,25 @@ from typing import TYPE_CHECKING, Any
 
 import pinocchio as pin
 
-from clients.bridge.base_state import BaseStateSource, FixedBase, SimulatorBase
+from clients.bridge.base_state import (
+    BaseStateSource,
+    FixedBase,
+    ImuSource,
+    SimulatedImuBase,
+    SimulatorBase,
+)
 from clients.bridge.buses import (
     bus_time_per_tick_s,
     check_motors,
     motor_peak_torque_Nm,
     open_buses,
 )
-from clients.bridge.config import BridgeConfig, BridgeConfigError, check_against_welcome
+from clients.bridge.config import (
+    BridgeConfig,
+    BridgeConfigError,
+    check_against_welcome,
+    imu_mount_on_root_body,
+)
 from clients.bridge.joint_map import JointMap
 from clients.bridge.loop import Bridge, BridgeReport, Pacer
 from clients.bridge.plant import RealTimePacer
@@ -41,6 +52,7 @@ if TYPE_CHECKING:
 __all__ = [
     "BridgeRun",
     "BridgeSession",
+    "check_base_state",
     "format_report",
     "open_bridge",
     "run_bridge",
@@ -111,6 +123,7 @@ def open_bridge(
     operator: queue.Queue[str] | None = None,
     timeout_s: float = 10.0,
     wall_clock: bool = False,
+    imu_source: ImuSource | None = None,
 ) -> Iterator[BridgeSession]:
     """Connect, check the map against the server, open the buses (or emulate them).
 
@@ -124,20 +137,23 @@ def open_bridge(
         timeout_s: Wait for the server's handshake.
         wall_clock: With ``emulate``, pace by the wall clock (the emulated
             robot then stands still): for timing the loop.
+        imu_source: The robot's IMU and contact flags, for ``base_state =
+            "imu"`` with ``[imu] source = "external"`` (real hardware).
 
     Raises:
         BridgeConfigError: The map does not match the server's joints, or a
-            motor model is unknown, or ``base_state = "simulator"`` without
-            emulation.
+            motor model is unknown, or the base-state source cannot be had:
+            ``base_state = "simulator"`` or an emulated IMU without emulation,
+            an external IMU without ``imu_source``, or an ``imu_source`` the
+            map does not use, or an ``[imu] frame`` that the model lacks or
+            that moves relative to the root body (all before connecting).
         BusError: A bus cannot be opened.
     """
     settings = config.bridge
     check_motors(config)
-    if settings.base_state == "simulator" and not emulate:
-        raise BridgeConfigError(
-            'base_state = "simulator" is the emulated robot\'s ground truth: run with '
-            '--emulate, or set base_state = "fixed" for a robot on a stand'
-        )
+    check_base_state(config, emulate, imu_source)
+    if settings.base_state == "imu":
+        imu_mount_on_root_body(config)  # a mistake in [imu] is one line, before connecting
     period_s = 1.0 / settings.rate_hz
     for name, spec in config.buses.items():
         busy_s = bus_time_per_tick_s(spec, len(config.joints_on(name)))
@@ -155,12 +171,21 @@ def open_bridge(
         client = stack.enter_context(
             ControllerClient(endpoint, timeout_s=timeout_s, curve=curve, record=record)
         )
+        mount: dict[str, Any] = {}
+        if settings.base_state == "imu":
+            imu = config.imu_settings
+            mount = {
+                "imu_frame": imu.frame or None,
+                "imu_position_in_frame": imu.position_in_frame,
+                "imu_orientation_in_frame_xyzw": imu.orientation_in_frame_xyzw,
+            }
         welcome = client.connect(
             **hello_model(settings.model),
             controller=settings.controller,
             params=settings.params,
             client_name="poise bridge",
             diagnostics_period_ticks=DIAGNOSTICS_PERIOD_TICKS,
+            **mount,
         )
         check_against_welcome(config, welcome)
         joint_map = JointMap(
@@ -173,7 +198,7 @@ def open_bridge(
         )
         model = pin.buildModelFromMJCF(str(resolve_model_path(settings.model)))
         pacer: Pacer = RealTimePacer(period_s)
-        base: BaseStateSource = FixedBase(welcome)
+        base: BaseStateSource = FixedBase(welcome) if imu_source is None else imu_source
         overrides: dict[str, dict[str, Any]] = {}
         emulation = None
         if emulate:
@@ -182,8 +207,11 @@ def open_bridge(
             emulation = stack.enter_context(Emulation(config, welcome, joint_map, wall_clock))
             overrides = emulation.bus_overrides
             pacer = emulation.pacer(period_s)
+            threshold_N = settings.support_force_threshold_N
             if settings.base_state == "simulator":
-                base = SimulatorBase(emulation.plant, settings.support_force_threshold_N)
+                base = SimulatorBase(emulation.plant, threshold_N)
+            elif emulation.imu is not None:
+                base = SimulatedImuBase(emulation.imu, emulation.plant, threshold_N)
         buses = open_buses(config, overrides)
         for bus in buses.values():
             stack.callback(bus.close)
@@ -200,6 +228,42 @@ def open_bridge(
             settings, joint_map, buses, client, base, pacer, model, operator, timeout_s, margin_s
         )
         yield BridgeSession(bridge, emulation)
+
+
+def check_base_state(config: BridgeConfig, emulate: bool, imu_source: ImuSource | None) -> None:
+    """Refuse a base-state source that this run cannot have, in one line.
+
+    Raises:
+        BridgeConfigError: ``base_state = "simulator"``, or ``"imu"`` with an
+            emulated IMU, without emulation; an external IMU without
+            ``imu_source``; an ``imu_source`` that the map does not use.
+    """
+    base_state = config.bridge.base_state
+    source = config.imu_settings.source
+    if base_state == "simulator" and not emulate:
+        raise BridgeConfigError(
+            'base_state = "simulator" is the emulated robot\'s ground truth: run with '
+            '--emulate, or set base_state = "fixed" for a robot on a stand'
+        )
+    if imu_source is not None and not (base_state == "imu" and source == "external"):
+        raise BridgeConfigError(
+            'an IMU source was given but the map does not use it: set base_state = "imu" '
+            'and, in [imu], source = "external"'
+        )
+    if base_state != "imu":
+        return
+    if source == "emulated" and not emulate:
+        raise BridgeConfigError(
+            '[imu] source = "emulated" is the emulated robot\'s IMU: run with --emulate; '
+            'on hardware set source = "external" and give the bridge your IMU (an ImuSource, '
+            "docs/bridge.md)"
+        )
+    if source == "external" and imu_source is None:
+        raise BridgeConfigError(
+            '[imu] source = "external" needs the robot\'s IMU: pass an ImuSource to '
+            "run_bridge or open_bridge (imu_source=...; docs/bridge.md), or set source = "
+            '"emulated" with --emulate (poise bridge has no IMU driver of its own)'
+        )
 
 
 def run_bridge(

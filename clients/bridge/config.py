@@ -10,19 +10,34 @@ every key: ``docs/bridge.md``):
 - ``[joints.NAME]``: per joint of the robot, its bus, actuator id, motor
   model, gearing (ratio, direction, zero offset) and limits.
 
-An optional ``[emulation]`` says how ``poise bridge --emulate`` simulates
-the robot behind emulated actuators. The map is checked against the
-server's announced joints at start (:func:`check_against_welcome`).
+An optional ``[imu]`` says where the IMU sits when ``base_state = "imu"``
+(the server then estimates the base from it), and an optional
+``[emulation]`` how ``poise bridge --emulate`` simulates the robot behind
+emulated actuators. The map is checked against the server's announced
+joints at start (:func:`check_against_welcome`).
 """
 
 from __future__ import annotations
 
+import difflib
+import math
 import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+import numpy as np
+import pinocchio as pin
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
+from clients.sim.imu import ImuSpec
+from clients.sim.model_file import body_names, resolve_model_path
 from clients.sim.scenario import PushSpec, explain
 from protocol.errors import PoiseError
 from protocol.messages import Welcome
@@ -33,8 +48,10 @@ __all__ = [
     "BridgeSettings",
     "BusSpec",
     "EmulationSpec",
+    "ImuSettings",
     "JointActuator",
     "check_against_welcome",
+    "imu_mount_on_root_body",
     "load_bridge_config",
 ]
 
@@ -88,10 +105,12 @@ class BridgeSettings(_Record):
     torque_scale: float = Field(
         default=1.0, gt=0.0, le=1.0, description="Scales every torque (bring-up on a stand)."
     )
-    base_state: Literal["simulator", "fixed"] = Field(
+    base_state: Literal["simulator", "fixed", "imu"] = Field(
         default="fixed",
         description="Where the base pose and twist come from: `simulator` (ground truth, "
-        "--emulate only) or `fixed` (at rest at the standing pose: a robot on a stand).",
+        "--emulate only), `fixed` (at rest at the standing pose: a robot on a stand) or "
+        "`imu` (the server estimates them from the IMU of `[imu]`, the joints and the "
+        "contact flags).",
     )
     support_force_threshold_N: float = Field(
         default=20.0, ge=0.0, description="Simulator base state: a foot supports above this (N)."
@@ -169,6 +188,56 @@ class JointActuator(_Record):
         return self
 
 
+_IMU_MOUNT_KEYS = ("body", "position_in_body_m", "orientation_in_body_xyzw")
+"""The keys of a simulated IMU's spec that ``[imu]`` gives instead (its mount)."""
+
+
+class ImuSettings(_Record):
+    """The ``[imu]`` table: where the IMU of ``base_state = "imu"`` sits, and what reads it.
+
+    The mount goes to the server in ``hello`` (``imu_frame`` and offset); the
+    frame must be rigid on the root body.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    frame: str = Field(
+        default="",
+        description="Model frame the IMU is fixed to, rigid on the root body; empty: the root "
+        "body.",
+    )
+    position_in_frame: tuple[float, float, float] = Field(
+        default=(0.0, 0.0, 0.0), description="IMU origin in `frame` (m)."
+    )
+    orientation_in_frame_xyzw: tuple[float, float, float, float] = Field(
+        default=(0.0, 0.0, 0.0, 1.0),
+        description="IMU axes in `frame`, quaternion x y z w (normalised on load).",
+    )
+    source: Literal["emulated", "external"] = Field(
+        default="emulated",
+        description="`emulated`: the simulated robot's IMU (--emulate only); `external`: an "
+        "`ImuSource` a program passes to `run_bridge` (real hardware).",
+    )
+
+    @field_validator("position_in_frame")
+    @classmethod
+    def _within_reach(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        if not all(abs(x) <= 10.0 for x in value):
+            raise ValueError(f"the IMU must sit within 10 m of its frame, got {list(value)}")
+        return value
+
+    @field_validator("orientation_in_frame_xyzw")
+    @classmethod
+    def _unit_quaternion(
+        cls, value: tuple[float, float, float, float]
+    ) -> tuple[float, float, float, float]:
+        norm = math.sqrt(sum(c * c for c in value))
+        if not norm > 1e-9:
+            raise ValueError(f"a rotation needs a non-zero quaternion x y z w, got {list(value)}")
+        x, y, z, w = (c / norm for c in value)
+        return (x, y, z, w)
+
+
 class EmulationSpec(_Record):
     """The ``[emulation]`` table: the simulated robot behind ``poise bridge --emulate``."""
 
@@ -176,6 +245,27 @@ class EmulationSpec(_Record):
     physics_rate_hz: float = Field(default=2000.0, gt=0.0, le=100_000.0)
     friction_coefficient: float = Field(default=0.8, gt=0.0, le=5.0)
     pushes: list[PushSpec] = Field(default_factory=list)
+    imu: ImuSpec = Field(
+        default_factory=ImuSpec,
+        description='The emulated IMU\'s rate and errors (`base_state = "imu"`, '
+        '`source = "emulated"`): the keys of `clients.sim.imu.ImuSpec` but its mount, '
+        "which `[imu]` gives. Default: a BMI088 at 1 kHz with an orientation output.",
+    )
+
+    @model_validator(mode="after")
+    def _imu(self) -> EmulationSpec:
+        mount = [key for key in _IMU_MOUNT_KEYS if key in self.imu.model_fields_set]
+        if mount:
+            raise ValueError(
+                f"emulation.imu.{mount[0]}: the IMU's mount is [imu]'s frame, "
+                "position_in_frame and orientation_in_frame_xyzw"
+            )
+        if self.imu.rate_hz > self.physics_rate_hz:
+            raise ValueError(
+                f"emulation.imu.rate_hz ({self.imu.rate_hz:g}) must not exceed "
+                f"physics_rate_hz ({self.physics_rate_hz:g}): a sample per physics step at most"
+            )
+        return self
 
 
 class BridgeConfig(_Record):
@@ -184,7 +274,24 @@ class BridgeConfig(_Record):
     bridge: BridgeSettings = Field(default_factory=BridgeSettings)
     buses: dict[str, BusSpec] = Field(description="Buses by name.")
     joints: dict[str, JointActuator] = Field(description="Actuators by joint name.")
+    imu: ImuSettings | None = Field(
+        default=None, description='The IMU of `base_state = "imu"` (default: `ImuSettings()`).'
+    )
     emulation: EmulationSpec = Field(default_factory=EmulationSpec)
+
+    @property
+    def imu_settings(self) -> ImuSettings:
+        """The ``[imu]`` table, or its defaults (an emulated IMU at the root body's origin)."""
+        return self.imu if self.imu is not None else ImuSettings()
+
+    @model_validator(mode="after")
+    def _imu_table(self) -> BridgeConfig:
+        if self.imu is not None and self.bridge.base_state != "imu":
+            raise ValueError(
+                f'an [imu] table is for base_state = "imu" (this map has base_state = '
+                f'"{self.bridge.base_state}"): set base_state = "imu", or remove [imu]'
+            )
+        return self
 
     @model_validator(mode="after")
     def _references(self) -> BridgeConfig:
@@ -258,3 +365,47 @@ def check_against_welcome(config: BridgeConfig, welcome: Welcome) -> None:
             f"the actuator map does not match {welcome.model_name}: {'; '.join(problems)} "
             f"(its joints: {', '.join(announced)})"
         )
+
+
+def imu_mount_on_root_body(config: BridgeConfig) -> tuple[str, pin.SE3]:
+    """Where ``[imu]`` mounts the IMU, in the root body's frame (checked before connecting).
+
+    ``frame`` may be any frame of the model rigid on the root body, as for the
+    server (``hello.imu_frame``); empty, the offset is in the root body's own
+    frame. A simulated IMU is fixed to an MJCF body: there, the root body.
+
+    Returns:
+        The root body's name, and the IMU's placement in its frame.
+
+    Raises:
+        BridgeConfigError: The frame is not one of the model's (the message
+            suggests the closest), or it moves relative to the root body.
+    """
+    settings = config.imu_settings
+    path = resolve_model_path(config.bridge.model)
+    model = pin.buildModelFromMJCF(str(path))
+    offset = pin.SE3(
+        pin.Quaternion(np.array(settings.orientation_in_frame_xyzw)).toRotationMatrix(),
+        np.array(settings.position_in_frame, dtype=float),
+    )
+    mount_in_joint = offset  # no frame: the root body's axes, as the server takes them
+    if settings.frame:
+        names = [frame.name for frame in model.frames]
+        if settings.frame not in names:
+            close = difflib.get_close_matches(settings.frame, names, n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise BridgeConfigError(
+                f"[imu] frame = {settings.frame!r}: {path.name} has no such frame; {hint}"
+                "frames on the root body: "
+                + ", ".join(f.name for f in model.frames if f.parentJoint == 1)
+            )
+        frame = model.frames[model.getFrameId(settings.frame)]
+        if frame.parentJoint != 1:
+            raise BridgeConfigError(
+                f"[imu] frame = {settings.frame!r} moves relative to the root body (joint "
+                f"{model.names[frame.parentJoint]!r} between them): mount the IMU on the root body"
+            )
+        mount_in_joint = frame.placement * offset
+    root = body_names(path)[0]
+    body = next(f for f in model.frames if f.type == pin.FrameType.BODY and f.name == root)
+    return root, body.placement.inverse() * mount_in_joint

@@ -6,6 +6,8 @@ each Dynamixel bus a pseudo-terminal with emulated servos; every emulated
 motor drives its joint of the simulated robot (:class:`~clients.bridge.plant.Plant`).
 The bridge opens the buses with :attr:`Emulation.bus_overrides` and is
 paced by the plant, so the run is reproducible whatever the machine's load.
+With ``base_state = "imu"`` (``source = "emulated"``) a simulated IMU sits
+where ``[imu]`` mounts it, fed after every physics step.
 """
 
 from __future__ import annotations
@@ -17,9 +19,10 @@ from contextlib import ExitStack
 from typing import Any
 
 import can
+import pinocchio as pin
 
 from clients.bridge.buses import motor_peak_torque_Nm
-from clients.bridge.config import BridgeConfig
+from clients.bridge.config import BridgeConfig, imu_mount_on_root_body
 from clients.bridge.emulators.damiao import EmulatedDamiao
 from clients.bridge.emulators.dynamixel import DynamixelEmulator
 from clients.bridge.emulators.mit import EmulatedMitActuator
@@ -29,10 +32,11 @@ from clients.bridge.joint_map import JointMap
 from clients.bridge.plant import Plant, PlantPacer, RealTimePacer
 from clients.bridge.protocols.damiao import DAMIAO_MOTOR_MODELS
 from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
+from clients.sim.imu import ImuSpec, SimulatedImu
 from clients.sim.runner import physics_backend, standing_state
 from protocol.messages import Welcome
 
-__all__ = ["Emulation"]
+__all__ = ["Emulation", "emulated_imu_spec"]
 
 _CHANNELS = itertools.count()
 
@@ -74,6 +78,7 @@ class Emulation:
 
     Attributes:
         plant: The simulated robot.
+        imu: Its IMU (``base_state = "imu"``, ``source = "emulated"``), else None.
         motors: Each joint's emulated motor, by joint name.
         devices: Each joint's protocol emulator, by joint name (fault
             injection in tests: ``motor.silent``, ``motor.fault_code``, …).
@@ -88,6 +93,9 @@ class Emulation:
         joint_map: JointMap,
         wall_clock: bool = False,
     ):
+        imu_spec = None  # first: a mistake in [imu] leaves nothing open
+        if config.bridge.base_state == "imu" and config.imu_settings.source == "emulated":
+            imu_spec = emulated_imu_spec(config)
         self._stack = ExitStack()
         self.wall_clock = wall_clock
         self.plant: Plant
@@ -147,6 +155,10 @@ class Emulation:
             [push.to_push() for push in config.emulation.pushes],
             welcome.standing_position_base_in_world[2],
         )
+        self.imu: SimulatedImu | None = None
+        if imu_spec is not None:
+            self.imu = SimulatedImu(imu_spec, config.bridge.model)
+            self.plant.add_sensor(self.imu)
 
     def _can_device(
         self, protocol: str, actuator_id: int, motor: str, master_id: int | None, joint: str
@@ -181,3 +193,21 @@ class Emulation:
 
     def __exit__(self, *exc_info: object) -> None:
         self._stack.close()
+
+
+def emulated_imu_spec(config: BridgeConfig) -> ImuSpec:
+    """The simulated IMU where ``[imu]`` mounts it, with the errors of ``[emulation] imu``.
+
+    Raises:
+        BridgeConfigError: See :func:`~clients.bridge.config.imu_mount_on_root_body`.
+    """
+    body, mount = imu_mount_on_root_body(config)
+    return config.emulation.imu.model_copy(
+        update={
+            "body": body,
+            "position_in_body_m": tuple(float(x) for x in mount.translation),
+            "orientation_in_body_xyzw": tuple(
+                float(x) for x in pin.Quaternion(mount.rotation).coeffs()
+            ),
+        }
+    )

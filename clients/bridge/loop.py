@@ -10,7 +10,10 @@ One tick (``rate_hz``, 200 Hz–1 kHz):
    :class:`~clients.bridge.base_state.BaseStateSource`;
 3. the state goes to the server. The torques it returns act from the next
    tick's exchange on, so the state sent is the one predicted one period
-   ahead (as ``poise sim`` does with ``command_delay_ticks = 1``);
+   ahead (as ``poise sim`` does with ``command_delay_ticks = 1``). With an
+   IMU instead of the base pose (``base_state = "imu"``) the prediction
+   would need the pose the server estimates: the measured state goes, with
+   the IMU's newest sample;
 4. the torques are checked (finite, one per joint), clamped to the derated
    limits, and converted to motor commands for step 1 of the next tick;
 5. the pacer waits for the next tick (the wall clock, or a simulated plant).
@@ -38,7 +41,7 @@ import numpy as np
 import pinocchio as pin
 
 from clients.bridge.actuator import ZERO_COMMAND, ActuatorBus, BusError, MotorCommand, MotorFeedback
-from clients.bridge.base_state import BaseStateSource
+from clients.bridge.base_state import BaseStateSource, ImuBaseReading
 from clients.bridge.config import BridgeSettings
 from clients.bridge.joint_map import JointMap
 from clients.bridge.safety import (
@@ -59,6 +62,9 @@ __all__ = ["Bridge", "BridgeReport", "BridgeStartError", "JointLink", "LoopTimin
 log = logging.getLogger("poise.bridge")
 
 _T = TypeVar("_T")
+
+_NO_BASE = (np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3), np.zeros(3))
+"""The base fields of a measured state whose base goes as an IMU sample (never sent)."""
 
 STATUS_PERIOD_S = 5.0
 """A status line (timing, link quality) is logged this often, at level INFO."""
@@ -196,10 +202,11 @@ class Bridge:
         joint_map: Joints in wire order and their actuators.
         buses: Every bus by name, open.
         client: Connected client (``connect`` done, welcome checked).
-        base: Where the base state comes from.
+        base: Where the base state (or the IMU sample the server estimates it
+            from) comes from.
         pacer: What the loop waits on between ticks.
         model: Pinocchio model of the robot (free-flyer root, wire order) for
-            the one-period prediction of the state sent.
+            the one-period prediction of the state sent (not used with an IMU).
         operator: Operator commands (``"estop"``, ``"rearm"``, ``"quit"``),
             read once per tick.
         connect_timeout_s: How long a re-arm waits for the server's handshake.
@@ -250,6 +257,7 @@ class Bridge:
         self._held: Command | None = None
         self._failed_buses: set[str] = set()
         self._pool: ThreadPoolExecutor | None = None
+        self._last_time_s = -math.inf
 
     def _zero_commands(self) -> dict[str, dict[int, MotorCommand]]:
         return {
@@ -473,26 +481,37 @@ class Bridge:
     def _step_server(self) -> Command | None:
         """Send this tick's state; the server's command, or None (counted, logged)."""
         reading = self.base.read()
-        measured = RobotState(
-            self.joint_position_rad.copy(),
-            self.joint_velocity_rad_s.copy(),
-            reading.position_base_in_world,
-            reading.orientation_base_in_world_xyzw,
-            reading.linear_velocity_base_in_world,
-            reading.angular_velocity_base_in_base,
-        )
-        period_s = self.pacer.period_s
         time_s = self.pacer.now_s() - self._origin_s
-        sent = measured
-        if self._held is not None:  # the command decided now acts from the next tick
-            sent = measured.predicted(period_s, self.model, self._held)
-            time_s += period_s
+        if isinstance(reading, ImuBaseReading):
+            # The server estimates the base from the IMU, integrated over the time between
+            # states: the measured joints go with the newest sample, at a time that advances.
+            if time_s <= self._last_time_s:
+                time_s = math.nextafter(self._last_time_s, math.inf)
+            joints = RobotState(
+                self.joint_position_rad.copy(), self.joint_velocity_rad_s.copy(), *_NO_BASE
+            )
+            state = joints.to_imu_message(time_s, reading.contact_flags, reading.imu)
+        else:
+            measured = RobotState(
+                self.joint_position_rad.copy(),
+                self.joint_velocity_rad_s.copy(),
+                reading.position_base_in_world,
+                reading.orientation_base_in_world_xyzw,
+                reading.linear_velocity_base_in_world,
+                reading.angular_velocity_base_in_base,
+            )
+            sent = measured
+            if self._held is not None:  # the command decided now acts from the next tick
+                sent = measured.predicted(self.pacer.period_s, self.model, self._held)
+                time_s += self.pacer.period_s
+            state = sent.to_message(time_s, reading.contact_flags)
         remaining_s = self.watchdog.remaining_s() - self.safe_margin_s
         if remaining_s <= 0.0:
             return None
         self.client.timeout_s = remaining_s
+        self._last_time_s = time_s
         try:
-            self.client.send_state(sent.to_message(time_s, reading.contact_flags))
+            self.client.send_state(state)
             command = self.client.receive_command()
         except ServerTimeout:
             self.report.server_timeouts += 1

@@ -7,13 +7,15 @@ received, and steps the simulator with those torques. So the bridge, the
 protocols and the emulators carry the whole robot, quantization and
 latency included; the plant advances only when the bridge waits for its
 next tick (:class:`PlantPacer`), which makes a run reproducible on any
-machine however loaded.
+machine however loaded. Sensors on the robot (an IMU) are fed after every
+physics step (:meth:`Plant.add_sensor`).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 
@@ -23,7 +25,19 @@ from clients.sim.backend import PhysicsBackend, Push
 from clients.sim.runner import fall_reason
 from clients.state import RobotState
 
-__all__ = ["Plant", "PlantPacer", "RealTimePacer"]
+__all__ = ["Plant", "PlantPacer", "PlantSensor", "RealTimePacer"]
+
+
+class PlantSensor(Protocol):
+    """A sensor on the simulated robot (e.g. :class:`~clients.sim.imu.SimulatedImu`)."""
+
+    def reset(self, state: RobotState, time_s: float) -> None:
+        """Start over at ``state`` (the plant's reset, or the sensor's mounting)."""
+        ...
+
+    def update(self, state: RobotState, time_s: float) -> object:
+        """Account for the physics step that ended at ``time_s`` in ``state``."""
+        ...
 
 
 class Plant:
@@ -54,20 +68,29 @@ class Plant:
         self.standing_height_m = standing_height_m
         self.fall_reason = ""
         self.fall_time_s: float | None = None
-        self._sense()
+        self.sensors: list[PlantSensor] = []
+        self._sense(backend.state())
 
     @property
     def time_s(self) -> float:
         """Simulated time (s)."""
         return self.backend.time_s
 
-    def reset(self, state: RobotState) -> None:
-        """Put the robot in ``state`` at time 0."""
-        self.backend.reset(state)
-        self._sense()
+    def add_sensor(self, sensor: PlantSensor) -> None:
+        """Mount ``sensor``: reset now and at every reset, updated after every physics step."""
+        sensor.reset(self.backend.state(), self.backend.time_s)
+        self.sensors.append(sensor)
 
-    def _sense(self) -> None:
+    def reset(self, state: RobotState) -> None:
+        """Put the robot in ``state`` at time 0 (its sensors start over too)."""
+        self.backend.reset(state)
         state = self.backend.state()
+        self._sense(state)
+        for sensor in self.sensors:
+            sensor.reset(state, self.backend.time_s)
+
+    def _sense(self, state: RobotState) -> None:
+        """Tell each emulated motor its joint's position and velocity."""
         position = self.joint_map.motor_position_rad(state.joint_position)
         velocity = self.joint_map.motor_velocity_rad_s(state.joint_velocity)
         for motor, q, v in zip(self.motors, position, velocity, strict=True):
@@ -82,11 +105,12 @@ class Plant:
                 motor.heat(float(torque), dt)
             active = [push for push in self.pushes if push.active(self.backend.time_s)]
             report = self.backend.step(self.joint_map.joint_torque_Nm(motor_torque), active)
-            self._sense()
+            state = self.backend.state()
+            self._sense(state)
+            for sensor in self.sensors:
+                sensor.update(state, self.backend.time_s)
             if not self.fall_reason:
-                reason = fall_reason(
-                    self.backend.state(), self.standing_height_m, report.non_foot_contact
-                )
+                reason = fall_reason(state, self.standing_height_m, report.non_foot_contact)
                 if reason:
                     self.fall_reason, self.fall_time_s = reason, self.backend.time_s
 

@@ -176,3 +176,117 @@ def test_bus_time_counts_the_frames_on_the_wire():
     # Dynamixel: sync write 14 + 3n, sync read 14 + n, n status packets of 32 bytes.
     spec = BusSpec(protocol="dynamixel", baudrate=4_000_000)
     assert bus_time_per_tick_s(spec, 10) == pytest.approx(10 * (28 + 4 * 10 + 320) / 4e6)
+
+
+IMU_EXAMPLE = EXAMPLE.with_name("revolute_humanoid_imu.toml")
+
+
+def imu_map(tmp_path, bridge: str = 'base_state = "imu"', tables: str = "") -> Path:
+    """A one-joint map with ``bridge`` in [bridge] and ``tables`` after it."""
+    return write(
+        tmp_path,
+        f'[bridge]\n{bridge}\n{tables}\n[buses.a]\nprotocol = "mit"\n'
+        '[joints.knee]\nbus = "a"\nid = 1\nmotor = "AK80-9"\n',
+    )
+
+
+def test_the_imu_example_is_the_mit_example_with_an_imu():
+    imu, mit = load_bridge_config(IMU_EXAMPLE), load_bridge_config(EXAMPLE)
+    assert imu.bridge.base_state == "imu" and imu.imu is not None
+    assert imu.imu.frame == "pelvis" and imu.imu.source == "emulated"
+    assert imu.joints == mit.joints and imu.buses == mit.buses
+    assert imu.bridge.model_copy(update={"base_state": "simulator"}) == mit.bridge
+    assert imu.emulation.pushes == mit.emulation.pushes
+
+
+def test_an_imu_base_without_an_imu_table_is_an_emulated_imu_on_the_root_body(tmp_path):
+    loaded = load_bridge_config(imu_map(tmp_path))
+    assert loaded.imu is None
+    assert loaded.imu_settings.frame == "" and loaded.imu_settings.source == "emulated"
+    assert loaded.imu_settings.orientation_in_frame_xyzw == (0.0, 0.0, 0.0, 1.0)
+    turned = load_bridge_config(
+        imu_map(tmp_path, tables="[imu]\norientation_in_frame_xyzw = [0, 0, 2, 2]\n")
+    )
+    assert turned.imu_settings.orientation_in_frame_xyzw == pytest.approx(
+        (0.0, 0.0, 0.5**0.5, 0.5**0.5)
+    )
+
+
+@pytest.mark.parametrize(
+    ("bridge", "tables", "message"),
+    [
+        (
+            'base_state = "simulator"',
+            '[imu]\nframe = "pelvis"\n',
+            r'an \[imu\] table is for base_state = "imu" \(this map has base_state = '
+            r'"simulator"\)',
+        ),
+        ("", "[imu]\n", r'an \[imu\] table is for base_state = "imu"'),  # the default: fixed
+        (
+            'base_state = "imu"',
+            '[imu]\nfram = "pelvis"\n',
+            r"unknown key 'imu.fram'; did you mean 'frame'\?",
+        ),
+        ('base_state = "imu"', '[imu]\nsource = "hardware"\n', r"imu.source: Input should be"),
+        ('base_state = "imus"', "", r"bridge.base_state: Input should be 'simulator', 'fixed'"),
+        (
+            'base_state = "imu"',
+            "[imu]\norientation_in_frame_xyzw = [0, 0, 0, 0]\n",
+            r"imu.orientation_in_frame_xyzw: a rotation needs a non-zero quaternion",
+        ),
+        (
+            'base_state = "imu"',
+            "[imu]\nposition_in_frame = [0, 0, 11]\n",
+            r"imu.position_in_frame: the IMU must sit within 10 m of its frame",
+        ),
+        (
+            'base_state = "imu"',
+            "[emulation.imu]\nrate = 500\n",
+            r"unknown key 'emulation.imu.rate'; did you mean 'rate_hz'\?",
+        ),
+        (
+            'base_state = "imu"',
+            '[emulation.imu]\nbody = "torso"\n',
+            r"emulation.imu.body: the IMU's mount is \[imu\]'s frame",
+        ),
+        (
+            'base_state = "imu"',
+            "[emulation]\nphysics_rate_hz = 1000\nimu = { rate_hz = 2000 }\n",
+            r"emulation.imu.rate_hz \(2000\) must not exceed physics_rate_hz \(1000\)",
+        ),
+    ],
+)
+def test_a_mistake_about_the_imu_is_one_line(tmp_path, bridge, tables, message):
+    with pytest.raises(BridgeConfigError, match=message) as error:
+        load_bridge_config(imu_map(tmp_path, bridge, tables))
+    assert "\n" not in str(error.value)
+
+
+@pytest.mark.parametrize(
+    ("source", "emulate", "imu_source", "message"),
+    [
+        ("emulated", False, None, r'\[imu\] source = "emulated" is the emulated robot\'s IMU: '),
+        ("external", False, None, r'\[imu\] source = "external" needs the robot\'s IMU: pass'),
+        ("external", True, None, r'\[imu\] source = "external" needs the robot\'s IMU: pass'),
+        ("emulated", True, object(), "an IMU source was given but the map does not use it"),
+    ],
+)
+def test_an_imu_the_run_cannot_have_is_refused_before_connecting(
+    tmp_path, source, emulate, imu_source, message
+):
+    from clients.bridge.app import open_bridge
+
+    loaded = load_bridge_config(imu_map(tmp_path, tables=f'[imu]\nsource = "{source}"\n'))
+    unreachable = "tcp://127.0.0.1:1"  # refused before any connection is tried
+    with pytest.raises(BridgeConfigError, match=message) as error:
+        with open_bridge(loaded, unreachable, emulate=emulate, imu_source=imu_source):
+            pass
+    assert "\n" not in str(error.value)
+
+
+def test_an_imu_source_with_another_base_state_is_refused():
+    from clients.bridge.app import check_base_state
+
+    with pytest.raises(BridgeConfigError, match="an IMU source was given but the map does not"):
+        check_base_state(load_bridge_config(EXAMPLE), True, object())  # type: ignore[arg-type]
+    check_base_state(load_bridge_config(EXAMPLE), True, None)
