@@ -156,12 +156,6 @@ def test_the_revolute_humanoid_stands_and_takes_a_push_on_the_servers_imu_estima
 
 
 @pytest.mark.e2e
-@pytest.mark.xfail(
-    strict=True,
-    reason="controller_server/estimation/base_estimator.py BaseEstimator.initialize sets the "
-    "IMU's orientation as R_WB R_BIᵀ instead of R_WB R_BI: an IMU mount with a rotation gives a "
-    "base estimate turned by twice that rotation (180° of yaw for this 90° mount)",
-)
 def test_an_imu_mounted_turned_gives_the_same_estimate(server, estimates_often):
     config = load_bridge_config(EXAMPLE)
     config = with_imu(config, orientation_in_frame_xyzw=(0.0, 0.0, 0.5**0.5, 0.5**0.5))
