@@ -86,6 +86,26 @@ MISTAKES = [
         ["initial_joint_position.left_knee = 0.3: give a list", "[x, y, z, w]"],
     ),
     (
+        "misspelled imu body",
+        lambda d: sim(d, scenario(d, 'base_state = "imu"\n[imu]\nbody = "pelvs"\n')),
+        ["imu.body", "no body 'pelvs'; did you mean 'pelvis'?"],
+    ),
+    (
+        "imu rate other than the control rate",
+        lambda d: sim(d, scenario(d, 'base_state = "imu"\n[imu]\nrate_hz = 400.0\n')),
+        ["imu.rate_hz (400) must equal control_rate_hz (1000)"],
+    ),
+    (
+        "imu with a delayed command",
+        lambda d: sim(d, scenario(d, 'base_state = "imu"\ncommand_delay_ticks = 1\n')),
+        ['base_state = "imu" needs command_delay_ticks = 0'],
+    ),
+    (
+        "unknown controller parameter",
+        lambda d: sim(d, scenario(d, "[params]\nstifnes = 3.0\n")),
+        ["the server refused the request: INVALID_PARAMS", "stifnes"],
+    ),
+    (
         "joint value of the wrong length",
         lambda d: sim(d, scenario(d, "[initial_joint_position]\nleft_knee = [0.3]\n")),
         ["a ball joint takes 4 number(s)"],

@@ -193,7 +193,15 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> Scenario:
         model_path = resolve_model_path(scenario.model)
     except FileNotFoundError as exc:
         raise ScenarioError(f"scenario {str(name_or_path)!r}: {exc}") from exc
-    _check_push_bodies(str(name_or_path), scenario, body_names(model_path))
+    bodies = body_names(model_path)
+    _check_push_bodies(str(name_or_path), scenario, bodies)
+    if scenario.imu.body and bodies and scenario.imu.body not in bodies:
+        close = difflib.get_close_matches(scenario.imu.body, bodies, n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise ScenarioError(
+            f"scenario {str(name_or_path)!r}: imu.body: {scenario.model} has no body "
+            f"{scenario.imu.body!r}; {hint}bodies: {', '.join(bodies)}"
+        )
     return scenario
 
 

@@ -44,11 +44,14 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     from clients.bridge.actuator import BusError
     from clients.bridge.config import BridgeConfigError
     from clients.bridge.loop import BridgeStartError
-    from clients.client import ServerTimeout
+    from clients.client import ServerError, ServerTimeout
     from clients.sim.errors import ScenarioError
     from clients.sim.output import OutputBusy
     from protocol.endpoints import InvalidEndpoint
+    from protocol.errors import ErrorCode
 
+    if isinstance(exc, ServerError) and exc.code != ErrorCode.INTERNAL:
+        return UsageError(f"the server refused the request: {exc}")
     if isinstance(
         exc,
         ScenarioError
