@@ -71,6 +71,7 @@ from controller_server.estimation.estimate import (
 from controller_server.estimation.inekf import (
     error_dynamics_matrix,
     error_transition_matrix,
+    ground_innovation,
     kinematic_innovation,
     propagate_mean,
 )
@@ -341,16 +342,22 @@ class BaseEstimator:
     def _update(self, measured) -> None:
         dim = len(self._covariance)
         count = len(self._stance)
-        h_matrix = np.zeros((3 * count, dim))
-        innovation = np.zeros(3 * count)
-        noise = np.zeros((3 * count, 3 * count))
+        ground = self.noise.flat_ground
+        rows = 3 * count + (count if ground is not None else 0)
+        h_matrix = np.zeros((rows, dim))
+        innovation = np.zeros(rows)
+        noise = np.zeros((rows, rows))
         for i, k in enumerate(self._stance):
-            rows = slice(3 * i, 3 * i + 3)
+            block = slice(3 * i, 3 * i + 3)
             y, covariance = measured[k]
-            innovation[rows], h_matrix[rows] = kinematic_innovation(
+            innovation[block], h_matrix[block] = kinematic_innovation(
                 self._rotation, self._columns, i, y
             )
-            noise[rows, rows] = self._rotation @ covariance @ self._rotation.T
+            noise[block, block] = self._rotation @ covariance @ self._rotation.T
+            if ground is not None:
+                row = 3 * count + i
+                innovation[row], h_matrix[row] = ground_innovation(self._columns, i)
+                noise[row, row] = ground**2
         p_ht = self._covariance @ h_matrix.T
         innovation_covariance = h_matrix @ p_ht + noise
         gain = np.linalg.solve(innovation_covariance, p_ht.T).T

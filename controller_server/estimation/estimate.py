@@ -61,6 +61,12 @@ class EstimatorNoise:
         contact_position_noise: Kinematic model error of each contact point (link lengths,
             sole compliance), m, 1σ.
         contact_slip_random_walk: Stance contact point velocity noise (slip), m/s/√Hz.
+        flat_ground: 1σ (m) of the assumption that stance contact points lie on flat, level
+            ground at ``z = 0`` (the ground under the feet at start), or ``None`` for no such
+            assumption. It makes the height observable after every foot has been lifted
+            and set down again (else heights are relative to where the feet landed, and
+            drift); it is wrong on stairs and slopes. Default 5 mm: a soft contact's
+            penetration at impact (MuJoCo's, measured).
     """
 
     gyro_noise_density: float = float(np.deg2rad(0.014))
@@ -70,6 +76,7 @@ class EstimatorNoise:
     joint_position_noise: float = 1e-3
     contact_position_noise: float = 2e-3
     contact_slip_random_walk: float = 3e-3
+    flat_ground: float | None = 5e-3
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from controller_server.estimation.lie import sek3_adjoint, skew, so3_gammas
 __all__ = [
     "error_dynamics_matrix",
     "error_transition_matrix",
+    "ground_innovation",
     "kinematic_innovation",
     "propagate_mean",
 ]
@@ -122,3 +123,26 @@ def kinematic_innovation(
     h_matrix[:, 15 + 3 * contact_slot : 18 + 3 * contact_slot] = np.eye(3)
     innovation = rotation @ measurement - (columns[2 + contact_slot] - columns[1])
     return innovation, h_matrix
+
+
+def ground_innovation(columns: np.ndarray, contact_slot: int) -> tuple[float, np.ndarray]:
+    """Innovation and Jacobian of "the stance point ``d_i`` is on the ground ``z = 0``".
+
+    A pseudo-measurement (flat, level ground): ``z = 0 − d̂_z``. With
+    ``d̂ ≈ d + ξ_R × d̂ + ξ_d`` and the true ``d_z = 0``, ``z = H (−ξ)`` to first order with
+    ``H = [(d̂ × e_z)ᵀ, 0, 0, 0, 0, …, e_zᵀ, …]``: it depends on the estimate through the
+    rotation column only (a point off the vertical axis tilts with the rotation error).
+
+    Args:
+        columns: ``(2 + K, 3)`` ``[v̂, p̂, d̂_1, …]``.
+        contact_slot: ``i`` of ``d̂_i`` (0-based among the contacts).
+
+    Returns:
+        ``(z, H)``: a number and ``(15 + 3K,)``.
+    """
+    dim = 9 + 3 * len(columns)
+    point = columns[2 + contact_slot]
+    h_row = np.zeros(dim)
+    h_row[0:3] = np.cross(point, [0.0, 0.0, 1.0])
+    h_row[17 + 3 * contact_slot] = 1.0
+    return -float(point[2]), h_row
