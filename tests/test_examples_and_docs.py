@@ -109,6 +109,7 @@ def test_hello_client_example_runs(server):
         ("load.py", ["--seconds", "1"]),
         ("record.py", ["--blocks", "2", "--block-ticks", "50"]),
         ("bridge.py", ["--count", "40", "--chunks", "2"]),
+        ("estimator.py", ["--ticks", "60", "--chunks", "2"]),
     ],
 )
 def test_benchmarks_run_and_print_ratios(script, args):

@@ -77,6 +77,7 @@ from controller_server.estimation.inekf import (
 )
 from controller_server.estimation.leg_kinematics import LegKinematics
 from controller_server.estimation.lie import sek3_exp, skew
+from controller_server.spatial import cross
 
 __all__ = ["BaseEstimator"]
 
@@ -415,7 +416,7 @@ class BaseEstimator:
         rotation_base = self._rotation @ self._rotation_imu_to_base.T
         offset = self._position_imu_in_base
         angular_velocity_base = self._rotation_imu_to_base @ (self._gyro_reading - self._bias[:3])
-        velocity_base = self._columns[0] - rotation_base @ np.cross(angular_velocity_base, offset)
+        velocity_base = self._columns[0] - rotation_base @ cross(angular_velocity_base, offset)
         position_base = self._columns[1] - rotation_base @ offset
         # Invariant errors to conventional base errors (see BaseEstimate.covariance).
         to_base = np.zeros((15, len(self._covariance)))

@@ -136,6 +136,7 @@ class ImuBaseEstimator:
         try:
             if not estimator.initialized:
                 self._initialize(state, kinematics)
+                estimate = estimator.estimate()
             else:
                 dt = state.time_s - self._time_s
                 if dt > MAX_STATE_GAP_S:
@@ -154,7 +155,7 @@ class ImuBaseEstimator:
                 estimator.forget_contacts(
                     [k for k, used in enumerate(corners) if used != self._corners[k]]
                 )
-                estimator.step(
+                estimate = estimator.step(
                     imu.angular_velocity_imu_in_imu,
                     imu.linear_acceleration_imu_in_imu,
                     dt,
@@ -166,7 +167,7 @@ class ImuBaseEstimator:
             raise EstimatorInputError(field, error.detail) from None
         self._time_s = state.time_s
         self._corners = corners
-        return estimator.estimate()
+        return estimate
 
     def _initialize(self, state: State, kinematics) -> None:
         imu = state.imu

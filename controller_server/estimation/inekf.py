@@ -143,6 +143,6 @@ def ground_innovation(columns: np.ndarray, contact_slot: int) -> tuple[float, np
     dim = 9 + 3 * len(columns)
     point = columns[2 + contact_slot]
     h_row = np.zeros(dim)
-    h_row[0:3] = np.cross(point, [0.0, 0.0, 1.0])
+    h_row[0:3] = point[1], -point[0], 0.0  # d̂ × e_z
     h_row[17 + 3 * contact_slot] = 1.0
     return -float(point[2]), h_row

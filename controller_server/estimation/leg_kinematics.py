@@ -16,8 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from controller_server.estimation.lie import skew
-
 __all__ = [
     "GROUNDED_TOLERANCE_M",
     "LegKinematics",
@@ -76,18 +74,23 @@ def compute_leg_kinematics(
     pin.computeJointJacobians(model, data, q)
     pin.updateFramePlacements(model, data)
     count = len(frame_ids)
+    offsets = np.zeros((count, 3)) if points_in_frame is None else np.asarray(points_in_frame)
     positions = np.zeros((count, 3))
     jacobians = np.zeros((count, 3, model.nv - 6))
-    for k, frame_id in enumerate(frame_ids):
+    for frame_id in dict.fromkeys(frame_ids):  # once per frame: a foot's corners share one
+        rows = [k for k, frame in enumerate(frame_ids) if frame == frame_id]
         placement = data.oMf[frame_id]
-        offset = np.zeros(3) if points_in_frame is None else np.asarray(points_in_frame[k])
-        offset_in_base = placement.rotation @ offset
-        positions[k] = placement.translation + offset_in_base
+        offsets_in_base = offsets[rows] @ placement.rotation.T
+        positions[rows] = placement.translation + offsets_in_base
         frame_jacobian = pin.getFrameJacobian(
             model, data, frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        )
-        point_jacobian = frame_jacobian[:3] - skew(offset_in_base) @ frame_jacobian[3:]
-        jacobians[k] = point_jacobian[:, 6:]
+        )[:, 6:]
+        # J_lin − [r]× J_ang for every point r (its offset from the frame origin, world axes).
+        x, y, z = offsets_in_base.T
+        skews = np.zeros((len(rows), 3, 3))
+        skews[:, 0, 1], skews[:, 0, 2], skews[:, 1, 2] = -z, y, -x
+        skews[:, 1, 0], skews[:, 2, 0], skews[:, 2, 1] = z, -y, x
+        jacobians[rows] = frame_jacobian[:3] - skews @ frame_jacobian[3:]
     return LegKinematics(position_points_in_base=positions, jacobians=jacobians)
 
 
