@@ -12,7 +12,13 @@ from clients.layout import joint_slices
 from clients.sim.model_file import resolve_model_path
 from clients.sim.runner import RunRecord
 
-__all__ = ["JOINT_GROUPS", "base_estimate_errors", "compute_metrics", "strictly_inside"]
+__all__ = [
+    "JOINT_GROUPS",
+    "base_estimate_error_series",
+    "base_estimate_errors",
+    "compute_metrics",
+    "strictly_inside",
+]
 
 JOINT_GROUPS = {
     "legs": ("hip", "knee", "ankle"),
@@ -98,17 +104,17 @@ def _foot_slip_and_rotation(record: RunRecord) -> tuple[float, float]:
     return slip_m, rotation_rad
 
 
-def base_estimate_errors(record: RunRecord) -> dict[str, float]:
-    """How far the server's base estimate (``base_state = "imu"``) was from the simulator's truth.
+def base_estimate_error_series(record: RunRecord) -> dict[str, np.ndarray]:
+    """Per tick with a ``base_estimate`` (``base_state = "imu"``), its error against the truth.
 
-    Over the ticks whose diagnostics carry ``base_estimate``, each against the true state
-    sent at that tick: the tilt error (angle between the true and estimated up axes in the
-    base frame: roll and pitch, not yaw), its largest and RMS value; the base velocity error
-    (norm, world) RMS; the largest base height error; and the yaw error at the end (yaw is
-    unobservable: it drifts). Empty when no tick has an estimate.
+    Against the true state sent at that tick: ``tilt_deg``, the angle between the true and
+    estimated up axes in the base frame (roll and pitch, not yaw); ``velocity_m_per_s``, the
+    norm of the base velocity error (world); ``height_m``, estimated minus true base height;
+    ``yaw_deg``, the heading error (unobservable: it drifts); and ``time_s``. Empty arrays
+    when no tick has an estimate.
     """
-    tilt_deg, velocity_m_per_s, height_m, yaw_deg = [], [], [], []
-    for state, command in zip(record.states, record.commands, strict=True):
+    rows = []
+    for time_s, state, command in zip(record.time_s, record.states, record.commands, strict=True):
         estimate = None if command.diagnostics is None else command.diagnostics.base_estimate
         if estimate is None:
             continue
@@ -117,22 +123,39 @@ def base_estimate_errors(record: RunRecord) -> dict[str, float]:
         up_true = rotation_true.inv().apply([0.0, 0.0, 1.0])
         up_estimated = rotation_estimated.inv().apply([0.0, 0.0, 1.0])
         cosine = np.clip(float(up_true @ up_estimated), -1.0, 1.0)
-        tilt_deg.append(np.degrees(np.arccos(cosine)))
         velocity_error = (
             estimate.linear_velocity_base_in_world - state.linear_velocity_base_in_world
         )
-        velocity_m_per_s.append(float(np.linalg.norm(velocity_error)))
-        height_m.append(estimate.position_base_in_world[2] - state.position_base_in_world[2])
-        yaw_deg.append(np.degrees((rotation_estimated * rotation_true.inv()).as_rotvec()[2]))
-    if not tilt_deg:
+        rows.append(
+            (
+                time_s,
+                np.degrees(np.arccos(cosine)),
+                float(np.linalg.norm(velocity_error)),
+                estimate.position_base_in_world[2] - state.position_base_in_world[2],
+                np.degrees((rotation_estimated * rotation_true.inv()).as_rotvec()[2]),
+            )
+        )
+    names = ("time_s", "tilt_deg", "velocity_m_per_s", "height_m", "yaw_deg")
+    columns = np.array(rows).reshape(-1, len(names)).T
+    return dict(zip(names, columns, strict=True))
+
+
+def base_estimate_errors(record: RunRecord) -> dict[str, float]:
+    """The run's base estimate errors (:func:`base_estimate_error_series`) summed up.
+
+    The largest and RMS tilt error, the velocity error's RMS, the largest height error
+    and the yaw error at the end; empty when no tick has an estimate.
+    """
+    series = base_estimate_error_series(record)
+    tilt = series["tilt_deg"]
+    if not tilt.size:
         return {}
-    tilt, velocity = np.array(tilt_deg), np.array(velocity_m_per_s)
     return {
         "tilt_error_max_deg": float(tilt.max()),
         "tilt_error_rms_deg": float(np.sqrt(np.mean(tilt**2))),
-        "velocity_error_rms_m_per_s": float(np.sqrt(np.mean(velocity**2))),
-        "height_error_max_m": float(np.max(np.abs(height_m))),
-        "yaw_error_end_deg": float(yaw_deg[-1]),
+        "velocity_error_rms_m_per_s": float(np.sqrt(np.mean(series["velocity_m_per_s"] ** 2))),
+        "height_error_max_m": float(np.max(np.abs(series["height_m"]))),
+        "yaw_error_end_deg": float(series["yaw_deg"][-1]),
     }
 
 

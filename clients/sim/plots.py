@@ -3,7 +3,10 @@
 One figure, four panels: the ground reference points (CM, COP, CMP) over the
 support polygon seen from above, the CM height, the momenta, and the joint
 torques (the peak and RMS over all joints, and each of the joints that peaked
-highest). Pushes are shaded and labelled with body, direction and force.
+highest). A simulated run whose base the server estimated from an IMU
+(``base_state = "imu"``) gets a fifth: the estimate's tilt, height and yaw
+errors against the simulator's truth. Pushes are shaded and labelled with
+body, direction and force.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from clients.sim.metrics import base_estimate_error_series
 from clients.sim.runner import RunRecord
 from clients.sim.scenario import PushSpec
 from protocol.messages import Command, JointInfo
@@ -38,6 +42,8 @@ class PlotSeries:
         commands: The commands, one per tick (some carry diagnostics).
         dof_names: A name per ``joint_torque`` entry (:func:`dof_names`).
         pushes: Pushes to shade (a log does not know them).
+        estimate_errors: The base estimate's errors against the truth
+            (:func:`~clients.sim.metrics.base_estimate_error_series`), when known.
     """
 
     title: str
@@ -45,6 +51,7 @@ class PlotSeries:
     commands: Sequence[Command]
     dof_names: Sequence[str]
     pushes: Sequence[PushSpec] = field(default_factory=tuple)
+    estimate_errors: dict[str, np.ndarray] | None = None
 
 
 def series_of_run(record: RunRecord) -> PlotSeries:
@@ -58,6 +65,7 @@ def series_of_run(record: RunRecord) -> PlotSeries:
         commands=record.commands,
         dof_names=dof_names(record.welcome.joints),
         pushes=scenario.pushes,
+        estimate_errors=base_estimate_error_series(record) if record.commands else None,
     )
 
 
@@ -73,7 +81,19 @@ def plot_series(series: PlotSeries, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    figure, axes = plt.subplots(2, 2, figsize=(13, 8.5), constrained_layout=True)
+    errors = series.estimate_errors
+    estimated = errors is not None and errors["time_s"].size > 0
+    figure = plt.figure(figsize=(13, 12 if estimated else 8.5), constrained_layout=True)
+    grid = figure.add_gridspec(
+        3 if estimated else 2, 2, height_ratios=[1, 1, 0.6][: 3 if estimated else 2]
+    )
+    axes = np.array(
+        [[figure.add_subplot(grid[row, column]) for column in range(2)] for row in range(2)]
+    )
+    if estimated:
+        estimate_axes = figure.add_subplot(grid[2, :])
+        _estimate_errors(estimate_axes, errors)
+        _shade_pushes(estimate_axes, series.pushes)
     diagnosed = [i for i, command in enumerate(series.commands) if command.diagnostics is not None]
     if diagnosed:
         _ground_points(axes[0, 0], series, diagnosed)
@@ -188,3 +208,16 @@ def _direction(force: np.ndarray) -> str:
     if abs(unit[axis]) > 0.99:
         return f"{'+' if unit[axis] > 0 else '-'}{'xyz'[axis]}"
     return "(" + ", ".join(f"{value:+.2f}" for value in unit) + ")"
+
+
+def _estimate_errors(ax: Any, errors: dict[str, np.ndarray]) -> None:
+    time_s = errors["time_s"]
+    ax.plot(time_s, errors["tilt_deg"], color="C0", lw=1, label="tilt (°)")
+    ax.plot(time_s, errors["yaw_deg"], color="C2", lw=1, label="yaw (°, unobservable)")
+    ax.set(title="Base estimate − truth", xlabel="time (s)", ylabel="angle (°)")
+    height_axis = ax.twinx()
+    height_axis.plot(time_s, 100 * errors["height_m"], color="C3", lw=1, label="height (cm)")
+    height_axis.set_ylabel("height (cm)")
+    lines = ax.get_legend_handles_labels()
+    more = height_axis.get_legend_handles_labels()
+    ax.legend(lines[0] + more[0], lines[1] + more[1], loc="upper left", fontsize=7)
