@@ -188,8 +188,9 @@ class BaseEstimator:
         Orientation: given, else levelled on the accelerometer (yaw zero; valid when still).
         Position: given, else ``x = y = 0`` and the height that puts the lowest stance
         contact point on ``z = 0``. Velocity and biases start at zero; every stance contact
-        is added to the state. ``angular_velocity_imu_in_imu`` (the gyro now) gives the
-        first estimate's angular velocity (else zero).
+        is added to the state. ``angular_velocity_imu_in_imu`` (the gyro now) is the gyro
+        bias when the prior says the robot stands still (:class:`EstimatorPrior`
+        ``still_at_start``), else it gives the first estimate's angular velocity.
 
         Raises:
             EstimatorInputError: Bad input, or no orientation source or no stance contact to
@@ -232,16 +233,20 @@ class BaseEstimator:
             )
         self.reset()
         self._gyro_reading = gyro
+        prior = self.prior
+        gyro_bias_sigma = prior.gyro_bias
+        if prior.still_at_start and angular_velocity_imu_in_imu is not None:
+            self._bias[:3] = gyro  # still: the reading is the bias
+            gyro_bias_sigma = prior.gyro_bias_at_rest
         self._rotation = rotation_base @ self._rotation_imu_to_base  # R_WI = R_WB R_BI
         position_imu = position_base + rotation_base @ self._position_imu_in_base
         self._columns = np.array([np.zeros(3), position_imu])
-        prior = self.prior
         sigma = np.concatenate(
             [
                 [prior.roll_pitch_rad, prior.roll_pitch_rad, prior.yaw_rad],
                 np.full(3, prior.velocity),
                 np.full(3, prior.position),
-                np.full(3, prior.gyro_bias),
+                np.full(3, gyro_bias_sigma),
                 np.full(3, prior.accel_bias),
             ]
         )

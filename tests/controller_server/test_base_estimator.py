@@ -20,6 +20,7 @@ from controller_server.estimation import (
     BaseEstimator,
     EstimatorInputError,
     EstimatorNoise,
+    EstimatorPrior,
     ImuMount,
     LegKinematics,
     compute_leg_kinematics,
@@ -28,6 +29,7 @@ from controller_server.estimation import (
 from controller_server.estimation.inekf import (
     error_dynamics_matrix,
     error_transition_matrix,
+    ground_innovation,
     kinematic_innovation,
     propagate_mean,
 )
@@ -170,7 +172,9 @@ def run(duration_s, seed, *, flags_at=lambda t: (True, True), feet_at=None):
     rng = np.random.default_rng(seed)
     noise = EstimatorNoise()
     imu = NoisyImu(rng, noise, gyro_bias=[0.006, -0.004, 0.008], accel_bias=[0.08, -0.06, 0.1])
-    estimator = BaseEstimator(["left", "right"], imu_mount=MOUNT, noise=noise)
+    # The synthetic base moves from the start: its first gyro reading is no bias.
+    prior = EstimatorPrior(still_at_start=False)
+    estimator = BaseEstimator(["left", "right"], imu_mount=MOUNT, noise=noise, prior=prior)
     dt = 1.0 / RATE_HZ
     history = []
     for i in range(int(duration_s * RATE_HZ) + 1):
@@ -454,6 +458,27 @@ def test_kinematic_innovation_is_linear_in_the_invariant_error():
         group = np.r_[0:9, 15 : h_matrix.shape[1]]
         np.testing.assert_allclose(derivative, -h_matrix[:, group] @ xi, atol=1e-8)
         assert not np.any(h_matrix[:, 9:15])
+
+
+def test_ground_innovation_is_linear_in_the_invariant_error():
+    """The flat-ground row: ``z(exp(ξ) X) = −H ξ`` to first order, for a stance point on z = 0."""
+    rng = np.random.default_rng(5)
+    eps = 1e-6
+    for _ in range(5):
+        _, columns = _random_state(rng)
+        slot = int(rng.integers(0, 2))
+        columns[2 + slot, 2] = 0.0  # the true stance point is on the ground
+        innovation, h_row = ground_innovation(columns, slot)
+        assert innovation == pytest.approx(0.0, abs=1e-12)
+        xi = rng.standard_normal(3 + 3 * len(columns))
+        innovations = []
+        for sign in (1.0, -1.0):
+            step_r, step_c = sek3_exp(sign * eps * xi)
+            innovations.append(ground_innovation(columns @ step_r.T + step_c, slot)[0])
+        derivative = (innovations[0] - innovations[1]) / (2 * eps)
+        group = np.r_[0:9, 15 : h_row.size]
+        assert derivative == pytest.approx(-h_row[group] @ xi, abs=1e-8)
+        assert not np.any(h_row[3:15])
 
 
 # -- leg kinematics with Pinocchio ---------------------------------------------------------
