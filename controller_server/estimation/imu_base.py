@@ -12,9 +12,11 @@ Start: the first ``imu`` state (and the first after a restart) initialises the f
 the robot standing on at least one flagged foot: orientation from the IMU's own filter
 when the sample carries one (prior roll/pitch σ :data:`AHRS_TILT_PRIOR_RAD`), else levelled
 on the accelerometer with yaw zero (prior σ 2°, a BMI088's zero-g offset is up to 1.1°
-of tilt); height from the lowest stance foot at ``z = 0``, ``x = y = 0``. A gap between
-states longer than :data:`MAX_STATE_GAP_S` cannot be integrated: the filter restarts at
-the next state, and the state of the gap is answered with an error.
+of tilt); the gyro bias from the first gyro reading (the robot still); height from the
+lowest stance foot at ``z = 0``, ``x = y = 0``. Each foot is measured at its sole corners
+on the ground (:func:`grounded_leg_kinematics`), and re-added to the filter when they
+change. A gap between states longer than :data:`MAX_STATE_GAP_S` cannot be integrated:
+the filter restarts at the next state, and the state of the gap is answered with an error.
 """
 
 from __future__ import annotations
