@@ -225,7 +225,17 @@ def open_bridge(
             for name, spec in config.buses.items()
         )
         bridge = Bridge(
-            settings, joint_map, buses, client, base, pacer, model, operator, timeout_s, margin_s
+            settings,
+            joint_map,
+            buses,
+            client,
+            base,
+            pacer,
+            model,
+            operator,
+            timeout_s,
+            margin_s,
+            imu_max_sample_age_s=config.imu_settings.max_sample_age_s,
         )
         yield BridgeSession(bridge, emulation)
 

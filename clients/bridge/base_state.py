@@ -175,10 +175,4 @@ class SimulatedImuBase:
         reading = self.imu.reading()
         if reading is None:
             raise RuntimeError("the simulated IMU has no sample: the plant did not reset it")
-        # Built without validation, as the state around it (the server validates it).
-        sample = ImuSample.model_construct(
-            angular_velocity_imu_in_imu=reading.angular_velocity_imu_in_imu,
-            linear_acceleration_imu_in_imu=reading.linear_acceleration_imu_in_imu,
-            orientation_imu_in_world_xyzw=reading.orientation_imu_in_world_xyzw,
-        )
-        return ImuBaseReading(sample, self.support.read())
+        return ImuBaseReading(reading.to_sample(), self.support.read())

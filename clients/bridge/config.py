@@ -218,6 +218,14 @@ class ImuSettings(_Record):
         description="`emulated`: the simulated robot's IMU (--emulate only); `external`: an "
         "`ImuSource` a program passes to `run_bridge` (real hardware).",
     )
+    max_sample_age_s: float = Field(
+        default=0.02,
+        gt=0.0,
+        le=1.0,
+        description="The same IMU sample (gyroscope and accelerometer unchanged) for longer "
+        "than this latches the safe state: a stalled driver would have the server integrate "
+        "a stale reading. Longer than the IMU's sample period.",
+    )
 
     @field_validator("position_in_frame")
     @classmethod

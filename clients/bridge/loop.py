@@ -213,6 +213,8 @@ class Bridge:
         safe_margin_s: How long before the watchdog expires the wait for the
             server ends, so that the safe state reaches the actuators within
             ``watchdog_s`` of the last valid command (an exchange's worth).
+        imu_max_sample_age_s: With an IMU, the same sample for longer than this (s)
+            latches the safe state (``[imu] max_sample_age_s``).
     """
 
     def __init__(
@@ -227,6 +229,7 @@ class Bridge:
         operator: queue.Queue[str] | None = None,
         connect_timeout_s: float = 10.0,
         safe_margin_s: float = 0.003,
+        imu_max_sample_age_s: float = 0.02,
     ):
         self.connect_timeout_s = connect_timeout_s
         self.settings = settings
@@ -258,6 +261,9 @@ class Bridge:
         self._failed_buses: set[str] = set()
         self._pool: ThreadPoolExecutor | None = None
         self._last_time_s = -math.inf
+        self.imu_max_sample_age_s = imu_max_sample_age_s
+        self._imu_sample: np.ndarray | None = None
+        self._imu_sample_since_s = 0.0
 
     def _zero_commands(self) -> dict[str, dict[int, MotorCommand]]:
         return {
@@ -442,6 +448,9 @@ class Bridge:
             self._hold_safe()
             return
         command = self._step_server()
+        if self.latch.latched:  # the server step found a reason (a stale IMU)
+            self._hold_safe()
+            return
         if command is None:
             self._without_command()
             return
@@ -478,11 +487,32 @@ class Bridge:
             )
             self._hold_safe()
 
+    def _stale_imu(self, reading: ImuBaseReading, time_s: float) -> str:
+        """Why the IMU's sample is too old to send (unchanged too long), or ``""``."""
+        sample = np.concatenate(
+            [reading.imu.angular_velocity_imu_in_imu, reading.imu.linear_acceleration_imu_in_imu]
+        )
+        if self._imu_sample is None or not np.array_equal(sample, self._imu_sample):
+            self._imu_sample, self._imu_sample_since_s = sample, time_s
+            return ""
+        age_s = time_s - self._imu_sample_since_s
+        limit_s = self.imu_max_sample_age_s
+        if age_s <= limit_s:
+            return ""
+        return (
+            f"the IMU sent the same sample for {age_s * 1e3:.0f} ms (limit "
+            f"[imu] max_sample_age_s = {limit_s:g} s): its driver stalled?"
+        )
+
     def _step_server(self) -> Command | None:
         """Send this tick's state; the server's command, or None (counted, logged)."""
         reading = self.base.read()
         time_s = self.pacer.now_s() - self._origin_s
         if isinstance(reading, ImuBaseReading):
+            stale = self._stale_imu(reading, time_s)
+            if stale:
+                self._trip(stale)
+                return None
             # The server estimates the base from the IMU, integrated over the time between
             # states: the measured joints go with the newest sample, at a time that advances.
             if time_s <= self._last_time_s:

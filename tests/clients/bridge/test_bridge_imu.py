@@ -246,6 +246,41 @@ def test_a_programs_own_imu_source_drives_the_bridge(server, estimates_often):
     assert np.abs(height).max() < 0.01
 
 
+class StallingImu(ProgramsImu):
+    """A driver that stops updating after ``live_reads`` reads: the same sample from then on."""
+
+    def __init__(self, live_reads: int) -> None:
+        super().__init__()
+        self.live_reads = live_reads
+        self.frozen: ImuBaseReading | None = None
+
+    def read(self) -> ImuBaseReading:
+        if self.frozen is not None:
+            return self.frozen
+        reading = super().read()
+        if self.reads == self.live_reads:
+            self.frozen = reading
+        return reading
+
+
+@pytest.mark.e2e
+def test_a_stalled_imu_latches_the_safe_state(server):
+    """The same sample past ``[imu] max_sample_age_s`` latches, as a silent actuator would."""
+    emulated = load_bridge_config(EXAMPLE)
+    config = with_imu(emulated, source="external", max_sample_age_s=0.02)
+    source = StallingImu(live_reads=100)
+    with open_bridge(config, server.endpoint, emulate=True, imu_source=source) as session:
+        plant = session.emulation.plant
+        source.imu = SimulatedImu(emulated_imu_spec(emulated), config.bridge.model)
+        plant.add_sensor(source.imu)
+        source.support = SupportFlags(plant, config.bridge.support_force_threshold_N)
+        report = session.bridge.run(0.5)
+    assert len(report.latches) == 1 and "same sample" in report.latches[0], report.latches
+    assert "max_sample_age_s" in report.latches[0]
+    # 500 Hz: sample 100 is the last fresh one; the 12th tick after it is 22 ms old.
+    assert report.commands == 100 + 10
+
+
 def test_the_emulated_imu_sits_where_the_map_mounts_it():
     config = load_bridge_config(EXAMPLE)
     spec = emulated_imu_spec(config)
