@@ -247,6 +247,21 @@ def _parser_message(exc: Exception, path: Path, name: str) -> str:
     return " ".join(_ABSOLUTE_PATH.sub("<path>", text).split())
 
 
+def _mjcf_has_free_joint(root: ET.Element) -> bool:
+    """Whether a body of the MJCF's world has a free joint, in either spelling.
+
+    ``<freejoint/>`` and ``<joint type="free"/>`` are the same joint to MuJoCo (and to
+    Pinocchio's parser); vendors write both.
+    """
+    world = root.find("worldbody")
+    if world is None:
+        return False
+    return any(
+        element.tag == "freejoint" or (element.tag == "joint" and element.get("type") == "free")
+        for element in world.iter()
+    )
+
+
 def _build_pinocchio(path: Path, fmt: str, name: str) -> pin.Model:
     """Parse with Pinocchio, adding a free-flyer root where the file has none.
 
@@ -397,7 +412,7 @@ def _load_uncached(text: bytes, name: str, fmt: str, contacts_json: str | None) 
         standing_position += model.referenceConfigurations["qpos0"][:3]
     model.jointPlacements[1] = pin.SE3.Identity()
     if fmt == "mjcf":
-        if root.find(".//freejoint") is None:
+        if not _mjcf_has_free_joint(root):
             # Pinocchio drops the root body's position when it adds the free flyer.
             standing_position = standing_position + _mjcf_root_body_position(root)
         torque_limit = _mjcf_torque_limits(root, model)

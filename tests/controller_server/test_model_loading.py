@@ -181,6 +181,21 @@ def test_mjcf_without_freejoint_stands_where_mujoco_puts_it() -> None:
         )
 
 
+@pytest.mark.parametrize(
+    "free_joint", ['<freejoint name="root"/>', '<joint name="root" type="free"/>']
+)
+def test_both_free_joint_spellings_stand_where_mujoco_puts_them(free_joint: str) -> None:
+    """Issue 18: ``<joint type="free"/>`` is a free joint too (its root ``pos`` counted once)."""
+    text = TINY_MJCF.replace(
+        '<inertial pos="0 0 0" mass="4"', f'{free_joint}\n      <inertial pos="0 0 0" mass="4"'
+    )
+    robot = load_robot_model(model_text=text)
+    mj = mujoco.MjModel.from_xml_string(text)
+    np.testing.assert_allclose(robot.standing_position_base_in_world, mj.qpos0[:3], atol=1e-12)
+    np.testing.assert_allclose(robot.standing_position_base_in_world, [0.0, 0.0, 0.5])
+    assert [info.name for info in robot.joints] == ["left_hip", "right_hip"]
+
+
 def test_urdf_text_with_contacts_uses_effort_limits() -> None:
     robot = load_robot_model(model_text=TINY_URDF, model_format="urdf", contacts=[URDF_FOOT])
     assert robot.model.joints[1].shortname() == "JointModelFreeFlyer"
