@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from controller_server.models import BUILTIN_MODELS
+
 TIMEOUT_S = 90  # the slowest case waits out the client's 10 s hello timeout
 
 
@@ -24,6 +26,16 @@ def scenario(directory: Path, text: str) -> str:
     path = directory / "mistake.toml"
     path.write_text('name = "mistake"\nduration_s = 0.05\n' + text)
     return str(path)
+
+
+def no_floor(directory: Path) -> Path:
+    """The thesis humanoid without its floor plane (issue 18: vendors ship it in a scene)."""
+    text = BUILTIN_MODELS["thesis_humanoid"].read_text()
+    floor = '<geom name="floor" type="plane" size="0 0 1" contype="0" conaffinity="1"/>'
+    assert floor in text
+    path = directory / "no_floor.xml"
+    path.write_text(text.replace(floor, ""))
+    return path
 
 
 def sim(directory: Path, *arguments: str) -> list[str]:
@@ -84,6 +96,11 @@ MISTAKES = [
         "joint value as a number",
         lambda d: sim(d, scenario(d, "[initial_joint_position]\nleft_knee = 0.3\n")),
         ["initial_joint_position.left_knee = 0.3: give a list", "[x, y, z, w]"],
+    ),
+    (
+        "a model without a floor in MuJoCo",
+        lambda d: sim(d, scenario(d, f'model = "{no_floor(d)}"\nbackend = "mujoco"\n')),
+        ["no floor: add a plane geom to the world body"],
     ),
     (
         "misspelled imu body",

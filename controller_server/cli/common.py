@@ -45,7 +45,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     from clients.bridge.config import BridgeConfigError
     from clients.bridge.loop import BridgeStartError
     from clients.client import ServerError, ServerTimeout
-    from clients.sim.errors import ScenarioError
+    from clients.sim.errors import ScenarioError, UnsupportedModel
     from clients.sim.output import OutputBusy
     from protocol.endpoints import InvalidEndpoint
     from protocol.errors import ErrorCode
@@ -55,6 +55,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     if isinstance(
         exc,
         ScenarioError
+        | UnsupportedModel
         | InvalidEndpoint
         | ServerTimeout
         | OutputBusy
