@@ -103,6 +103,15 @@ def check_base_form(state: State) -> None:
         )
 
 
+def _base_fields(state: State) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The four base fields of a state that gives them (see :func:`check_base_form`)."""
+    fields = [getattr(state, name) for name in BASE_POSE_FIELDS]
+    if any(field is None for field in fields):
+        raise ProtocolError(ErrorCode.INVALID_FIELD, "", "the state lacks base fields", state.seq)
+    position, orientation, linear_velocity, angular_velocity = fields
+    return position, orientation, linear_velocity, angular_velocity
+
+
 def control_input_from_state(
     robot: RobotModel,
     state: State,
@@ -167,10 +176,8 @@ def control_input_from_state(
         )
         linear_velocity = estimate.linear_velocity_base_in_world
         angular_velocity = estimate.angular_velocity_base_in_base
-    else:
-        position, orientation = state.position_base_in_world, state.orientation_base_in_world_xyzw
-        linear_velocity = state.linear_velocity_base_in_world
-        angular_velocity = state.angular_velocity_base_in_base
+    else:  # check_base_form: all four are there
+        position, orientation, linear_velocity, angular_velocity = _base_fields(state)
         _check_quaternion("orientation_base_in_world_xyzw", orientation, seq)
 
     q = np.concatenate([position, orientation, state.joint_position])

@@ -90,7 +90,7 @@ def plot_series(series: PlotSeries, path: Path) -> None:
     axes = np.array(
         [[figure.add_subplot(grid[row, column]) for column in range(2)] for row in range(2)]
     )
-    if estimated:
+    if estimated and errors is not None:
         estimate_axes = figure.add_subplot(grid[2, :])
         _estimate_errors(estimate_axes, errors)
         _shade_pushes(estimate_axes, series.pushes)

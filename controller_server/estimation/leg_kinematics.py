@@ -155,7 +155,9 @@ def grounded_leg_kinematics(
             points.append(point)
     corners = compute_leg_kinematics(robot.model, data, joint_position, frame_ids, points)
     heights = corners.position_points_in_base @ rotation_base_in_world[2]
-    positions, jacobians, used = [], [], []
+    positions: list[np.ndarray] = []
+    jacobians: list[np.ndarray] = []
+    used: list[tuple[int, ...]] = []
     start = 0
     for contact in robot.contacts:
         rows = slice(start, start + len(contact.points_in_frame))

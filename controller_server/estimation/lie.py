@@ -53,7 +53,7 @@ def _gamma_coefficients(phi: np.ndarray) -> tuple[float, float, float, float]:
     t2 = float(x * x + y * y + z * z)
     if t2 < _SMALL_ANGLE * _SMALL_ANGLE:
         # The closed forms cancel catastrophically at small angles.
-        return tuple(_even_series(t2, k) for k in (1, 2, 3, 4))
+        return (_even_series(t2, 1), _even_series(t2, 2), _even_series(t2, 3), _even_series(t2, 4))
     theta = math.sqrt(t2)
     sin, cos = math.sin(theta), math.cos(theta)
     return (
