@@ -33,6 +33,7 @@ from protocol.messages import (
 )
 
 __all__ = [
+    "BaseFields",
     "EstimateBase",
     "base_estimate_diagnostics",
     "check_base_form",
@@ -74,14 +75,24 @@ def _check_quaternion(field: str, quaternion: np.ndarray, seq: int) -> None:
         )
 
 
-def check_base_form(state: State) -> None:
+BaseFields = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""Position, orientation (xyzw), linear velocity (world) and angular velocity (base)."""
+
+
+def check_base_form(state: State) -> BaseFields | None:
     """The state gives the base one way: all of :data:`BASE_POSE_FIELDS`, or ``imu``.
+
+    Returns:
+        The four base fields, or ``None`` for a state that gives ``imu``.
 
     Raises:
         ProtocolError: ``INVALID_FIELD`` naming the fields: both forms, or neither
             (some base fields and no ``imu`` counts as neither, naming the missing ones).
     """
-    given = [name for name in BASE_POSE_FIELDS if getattr(state, name) is not None]
+    fields = [getattr(state, name) for name in BASE_POSE_FIELDS]
+    given = [
+        name for name, field in zip(BASE_POSE_FIELDS, fields, strict=True) if field is not None
+    ]
     if state.imu is not None:
         if given:
             raise ProtocolError(
@@ -91,7 +102,7 @@ def check_base_form(state: State) -> None:
                 "as the four base fields or as `imu`, not both",
                 state.seq,
             )
-        return
+        return None
     missing = [name for name in BASE_POSE_FIELDS if name not in given]
     if missing:
         raise ProtocolError(
@@ -101,13 +112,6 @@ def check_base_form(state: State) -> None:
             f"{', '.join(BASE_POSE_FIELDS)} or as `imu` (an IMU reading, estimated by the server)",
             state.seq,
         )
-
-
-def _base_fields(state: State) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The four base fields of a state that gives them (see :func:`check_base_form`)."""
-    fields = [getattr(state, name) for name in BASE_POSE_FIELDS]
-    if any(field is None for field in fields):
-        raise ProtocolError(ErrorCode.INVALID_FIELD, "", "the state lacks base fields", state.seq)
     position, orientation, linear_velocity, angular_velocity = fields
     return position, orientation, linear_velocity, angular_velocity
 
@@ -138,7 +142,7 @@ def control_input_from_state(
         EstimatorInputError: From ``estimate_base``.
     """
     seq = state.seq
-    check_base_form(state)
+    base = check_base_form(state)
     _check_length("joint_position", state.joint_position, robot.nq_joints, seq)
     _check_length("joint_velocity", state.joint_velocity, robot.nv_joints, seq)
     if len(state.contact_flags) != len(robot.contacts):
@@ -160,7 +164,8 @@ def control_input_from_state(
         worst = int(np.argmax(np.abs(squared_norms - 1.0)))
         _check_quaternion("joint_position", quaternions[worst], seq)
     estimate = None
-    if state.imu is not None:
+    if base is None:
+        assert state.imu is not None  # check_base_form: the other form
         if state.imu.orientation_imu_in_world_xyzw is not None:
             _check_quaternion(
                 "imu.orientation_imu_in_world_xyzw", state.imu.orientation_imu_in_world_xyzw, seq
@@ -176,8 +181,8 @@ def control_input_from_state(
         )
         linear_velocity = estimate.linear_velocity_base_in_world
         angular_velocity = estimate.angular_velocity_base_in_base
-    else:  # check_base_form: all four are there
-        position, orientation, linear_velocity, angular_velocity = _base_fields(state)
+    else:
+        position, orientation, linear_velocity, angular_velocity = base
         _check_quaternion("orientation_base_in_world_xyzw", orientation, seq)
 
     q = np.concatenate([position, orientation, state.joint_position])
