@@ -1,15 +1,28 @@
-"""Baselines the benchmarks measure in the same run: a raw pyzmq echo server, the tick floor."""
+"""What the benchmarks share: a raw pyzmq echo server and the tick floor (baselines measured in
+the same run), and a per-call timer."""
 
 from __future__ import annotations
 
 import ctypes
 import multiprocessing
+import time
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import daqp
 import numpy as np
 import pinocchio as pin
 import zmq
+
+
+def timed(step: Callable[[Any], object], items: Iterable[Any]) -> list[float]:
+    """Wall-clock seconds of ``step(item)`` for each item, in order."""
+    times = []
+    for item in items:
+        start = time.perf_counter()
+        step(item)
+        times.append(time.perf_counter() - start)
+    return times
 
 
 def echo_server(endpoint_queue: multiprocessing.Queue, reply_size: int) -> None:

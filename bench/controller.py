@@ -27,11 +27,10 @@ from controller_server.blas import default_to_single_threaded_blas
 default_to_single_threaded_blas()  # before numpy: see controller_server/blas.py
 
 import argparse
-import time
 from pathlib import Path
 
 import numpy as np
-from baselines import Floor
+from baselines import Floor, timed
 
 from clients.sampling import random_state
 from controller_server.controllers import create_controller
@@ -45,15 +44,6 @@ CONTROLLERS = ("tracking", "momentum", "prioritized")
 RECORDED_STATES = Path(__file__).parent.parent / "tests" / "fixtures" / "replay_momentum_push.mcap"
 MOMENTUM_GOAL_RATIO = 2.0
 PRIORITIZED_GOAL_S = 1e-3
-
-
-def timed(step, items) -> list[float]:
-    times = []
-    for item in items:
-        start = time.perf_counter()
-        step(item)
-        times.append(time.perf_counter() - start)
-    return times
 
 
 def main() -> None:

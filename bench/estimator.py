@@ -17,9 +17,9 @@ from controller_server.blas import default_to_single_threaded_blas
 default_to_single_threaded_blas()  # before numpy: see controller_server/blas.py
 
 import argparse
-import time
 
 import numpy as np
+from baselines import timed
 
 from clients.state import RobotState
 from controller_server.session import Session
@@ -42,15 +42,6 @@ def imu_states(standing: RobotState, ticks: int, rng: np.random.Generator) -> li
         )
         states.append(standing.to_imu_message(tick * 1e-3, [True, True], sample))
     return states
-
-
-def timed(step, items) -> list[float]:
-    times = []
-    for item in items:
-        start = time.perf_counter()
-        step(item)
-        times.append(time.perf_counter() - start)
-    return times
 
 
 def main() -> None:
