@@ -35,7 +35,8 @@ from clients.bridge.loop import Bridge
 from clients.sim.imu import SimulatedImu
 from clients.sim.runner import standing_state
 from clients.state import RobotState
-from protocol.messages import Command, ImuSample, JointInfo, State, Welcome
+from protocol.messages import Command, ImuSample, State
+from tests.clients.bridge.test_bridge_config import welcome as one_revolute_joint_per_name
 
 EXAMPLE = Path(__file__).parents[3] / "examples" / "bridge" / "revolute_humanoid_imu.toml"
 DIAGNOSTICS_PERIOD_TICKS = 10
@@ -373,27 +374,7 @@ def test_imu_states_go_at_strictly_increasing_times_and_without_a_base():
             "joints": {"knee": {"bus": "a", "id": 1}},
         }
     )
-    welcome = Welcome(
-        session_id="s",
-        model_name="robot",
-        model_hash="h",
-        total_mass=10.0,
-        standing_position_base_in_world=(0.0, 0.0, 1.0),
-        joints=[
-            JointInfo(
-                name="knee",
-                kind="revolute",
-                nq=1,
-                nv=1,
-                torque_limit=[50.0],
-                position_lower=[-1.0],
-                position_upper=[1.0],
-            )
-        ],
-        contacts=[],
-        controller="momentum",
-        params={},
-    )
+    welcome = one_revolute_joint_per_name("knee")
     sample = ImuSample(
         angular_velocity_imu_in_imu=[0.0, 0.0, 0.1], linear_acceleration_imu_in_imu=[0, 0, 9.8]
     )
