@@ -37,7 +37,9 @@ class Session:
             hello.model,
             model_text=hello.model_text,
             model_format=hello.model_format,
+            model_assets=hello.model_assets,
             contacts=hello.contacts,
+            keyframe=hello.keyframe,
         )
         if (
             hello.expected_model_hash is not None
@@ -66,6 +68,10 @@ class Session:
             model_hash=self.robot.model_hash,
             total_mass=self.robot.total_mass,
             standing_position_base_in_world=tuple(self.robot.standing_position_base_in_world),
+            standing_orientation_base_in_world_xyzw=tuple(
+                self.robot.standing_orientation_base_in_world_xyzw
+            ),
+            standing_joint_position=list(self.robot.standing_joint_position),
             joints=list(self.robot.joints),
             contacts=[contact.to_spec() for contact in self.robot.contacts],
             controller=self.controller.name,

@@ -106,11 +106,14 @@ class ContactSpec(_Strict):
 
     name: str = wire_field("Contact name, e.g. `left_foot`.")
     frame: str = wire_field("Model frame the points are expressed in, e.g. `left_sole`.")
-    points_in_frame: list[tuple[float, float, float]] = wire_field(
-        "Contact points: the corners of the sole rectangle.",
+    points_in_frame: list[tuple[float, float, float]] | None = wire_field(
+        "Contact points: the corners of the sole rectangle. In `hello`, leave it out to have "
+        "the server find the sole from the collision geometry of the frame's body and its "
+        "descendants (docs/models.md); `welcome` always gives the points.",
         shape="k × 3",
         unit="m",
         frame="`frame`",
+        default=None,
         min_length=1,
     )
     friction_coefficient: float = wire_field(
@@ -119,7 +122,7 @@ class ContactSpec(_Strict):
 
     @model_validator(mode="after")
     def _finite_points(self) -> ContactSpec:
-        for point in self.points_in_frame:
+        for point in self.points_in_frame or ():
             if not all(abs(c) < 1e6 for c in point):
                 raise ValueError(f"contact points must be finite and < 1e6 m, got {point}")
         return self
@@ -143,9 +146,23 @@ class Hello(Message):
     model_format: Literal["mjcf", "urdf"] = wire_field(
         "Format of `model_text` (a `model` path ending in `.urdf` is URDF).", default="mjcf"
     )
-    contacts: list[ContactSpec] | None = wire_field(
-        "Contact definitions (see ContactSpec); default: every `*_sole` box site of an MJCF.",
+    model_assets: dict[str, bytes] | None = wire_field(
+        "Files `model_text` names (`<include>`d MJCF, meshes), by the path it names them "
+        'with, relative to its directory, e.g. `{"robot.xml": …, "assets/foot.stl": …}`. '
+        "A sent model reads no other file.",
         default=None,
+        max_length=512,
+    )
+    contacts: list[ContactSpec] | None = wire_field(
+        "Contact definitions (see ContactSpec). Default: every `*_sole` box site of an MJCF, "
+        "else the feet found from the collision geometry (docs/models.md).",
+        default=None,
+    )
+    keyframe: str | None = wire_field(
+        "MJCF keyframe (`<key name>`) of the standing pose: it sets the standing base pose and "
+        "joints, the reference pose and the CM height. Default: the file's pose.",
+        default=None,
+        max_length=200,
     )
     controller: str = wire_field(
         "Controller: `momentum` (default; Macchietto 2008, every objective), `prioritized` "
@@ -235,10 +252,23 @@ class Welcome(Message):
     model_hash: str = wire_field("SHA-256 of the model file text and the contact definitions.")
     total_mass: float = wire_field("Total mass.", unit="kg")
     standing_position_base_in_world: tuple[float, float, float] = wire_field(
-        "Base position at which the neutral pose stands with its soles on z = 0.",
+        "Base position of the standing pose (`hello.keyframe`, else the file's pose), its "
+        "lowest contact point on z = 0.",
         shape="3",
         unit="m",
         frame="world",
+    )
+    standing_orientation_base_in_world_xyzw: tuple[float, float, float, float] = wire_field(
+        "Base orientation of the standing pose, quaternion scalar last.",
+        shape="4",
+        frame="world",
+        default=(0.0, 0.0, 0.0, 1.0),
+    )
+    standing_joint_position: list[float] | None = wire_field(
+        "Joint positions of the standing pose, wire order (ball joints: xyzw).",
+        shape="nq",
+        unit="rad, m",
+        default=None,
     )
     joints: list[JointInfo] = wire_field("Actuated joints in wire order (see JointInfo).")
     contacts: list[ContactSpec] = wire_field("Contacts in `contact_flags` order.")

@@ -197,13 +197,13 @@ class Controller(ABC):
     def default_value(self, key: str) -> Any:
         """Default of a parameter; model-dependent ones are derived from the robot.
 
-        Shared model-dependent defaults: the neutral pose for
-        ``reference_joint_position``, all ones for ``support_mask``, the
+        Shared model-dependent defaults: the standing pose's joints (the
+        keyframe's, or the file's pose) for ``reference_joint_position``, all ones for ``support_mask``, the
         model's μ for ``friction_coefficients``. Override for others.
         """
         robot = self.robot
         if key == "reference_joint_position":
-            return pin.neutral(robot.model)[7:]
+            return robot.standing_joint_position.copy()
         if key == "support_mask":
             return np.ones(len(robot.contacts))
         if key == "friction_coefficients":

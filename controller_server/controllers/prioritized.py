@@ -278,8 +278,7 @@ class PrioritizedController(Controller):
         if key == "torque_selection":
             return np.zeros(robot.nv_joints)
         if key == "com_height":
-            q = pin.neutral(robot.model)
-            q[:3] = robot.standing_position_base_in_world
+            q = robot.standing_configuration
             return float(pin.centerOfMass(robot.model, robot.model.createData(), q)[2])
         return super().default_value(key)
 

@@ -1,29 +1,26 @@
-"""Floating-base robot models loaded with Pinocchio.
+"""Floating-base robot models, read as their vendors wrote them and served to sessions.
 
 A :class:`RobotModel` is everything the server knows about one robot: the
 Pinocchio model (free-flyer root first), the actuated joints in wire order,
-torque and position limits, and the contacts (feet with their sole points).
-It is immutable and shared by every session that uses the same file; each
-session keeps its own ``pinocchio.Data``.
+torque and position limits, the contacts (feet with their sole points) and
+the standing pose. It is immutable and shared by every session that uses the
+same files; each session keeps its own ``pinocchio.Data``.
 
 Sources: a built-in name (:data:`BUILTIN_MODELS`), a file in the server's
 model directories (:mod:`controller_server.files`), or the file's text sent
-in ``hello``. MJCF and URDF are both read by Pinocchio; a free-flyer root is
-added where the file has none. For MJCF the torque limits come from the
-``<actuator>`` motors (|gear| × ctrlrange) and the default contacts from
-``*_sole`` box sites (the four corners of the box's x–y rectangle). URDF
-files give torque limits in ``<limit effort>`` and must name their contacts
-in ``hello``.
+in ``hello`` with the files it names. The reading itself — MuJoCo's compiler
+for MJCF, Pinocchio's parser for URDF, contacts found from the collision
+geometry, limits, keyframes — is :mod:`controller_server.models.description`,
+shared with the simulators; this module adds the server's file policy (a
+model in the model directories names files only inside them; a sent model
+only the files sent with it), the cache and the wire descriptions.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import os
-import re
-import tempfile
-import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
 from pathlib import Path
@@ -31,8 +28,16 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from controller_server.errors import FrameNotFound, ModelError, ModelNotFound
+from controller_server.errors import FrameNotFound, ModelError, ModelNotFound, ServerFault
 from controller_server.files import ServerFileKind
+from controller_server.models.description import (
+    DescriptionError,
+    FoundContact,
+    FrameNotFoundError,
+    RobotDescription,
+    describe,
+    gather_files,
+)
 from protocol.messages import ContactSpec, JointInfo
 
 __all__ = [
@@ -62,11 +67,17 @@ MODEL_FILES = ServerFileKind(
 )
 """The model files a ``hello`` may name: built-ins, or files in the model directories."""
 
+MODEL_ASSET_FILES = ServerFileKind(
+    kind="file named by a model",
+    field="model",
+    builtin={},
+    suffixes=(".xml", ".urdf", ".stl", ".obj", ".msh", ".ply", ".png"),
+    not_found=ModelNotFound,
+)
+"""What a model in the model directories may name (includes, meshes, textures): files in them."""
+
 DEFAULT_MODEL_CACHE_SIZE = 16
 """Loaded models kept (least recently used dropped first) unless set otherwise."""
-
-# Absolute paths of two or more components, as parser messages may carry them.
-_ABSOLUTE_PATH = re.compile(r"(?<![\w.~-])(?:/[\w.+~-]+){2,}/?")
 
 _JOINT_KINDS = {
     "JointModelRX": "revolute",
@@ -120,10 +131,11 @@ class RobotModel:
         joints: Actuated joints in wire order (Pinocchio order).
         contacts: Supports in ``contact_flags`` order.
         torque_limit: ``(nv - 6,)`` symmetric torque limits (N·m, N).
-        standing_position_base_in_world: Base position (m) at which the
-            neutral pose stands (the file's root body position).
+        standing_configuration: Pinocchio ``q`` of the standing pose (the
+            keyframe's or the file's), its lowest contact point at z = 0.
         ball_swing_limit: Maximum swing angle (rad) per ball joint name, from
             the MJCF ``range`` upper bound (π where the file gives none).
+        description: What was read from the file (actuator kinds, warnings …).
     """
 
     name: str
@@ -132,8 +144,24 @@ class RobotModel:
     joints: tuple[JointInfo, ...]
     contacts: tuple[Contact, ...]
     torque_limit: np.ndarray
-    standing_position_base_in_world: np.ndarray
+    standing_configuration: np.ndarray
     ball_swing_limit: dict[str, float]
+    description: RobotDescription
+
+    @property
+    def standing_position_base_in_world(self) -> np.ndarray:
+        """Base position (m) of the standing pose."""
+        return self.standing_configuration[:3]
+
+    @property
+    def standing_orientation_base_in_world_xyzw(self) -> np.ndarray:
+        """Base orientation of the standing pose, quaternion ``[x, y, z, w]``."""
+        return self.standing_configuration[3:7]
+
+    @property
+    def standing_joint_position(self) -> np.ndarray:
+        """Joint positions of the standing pose, wire order (rad, m; ball: xyzw)."""
+        return self.standing_configuration[7:]
 
     @property
     def nq_joints(self) -> int:
@@ -174,122 +202,12 @@ class RobotModel:
         return (self.ball_quaternion_starts[:, None] + np.arange(4)).reshape(-1)
 
 
-def _mjcf_torque_limits(root: ET.Element, model: pin.Model) -> np.ndarray:
-    """Torque limits per DoF from MJCF ``<motor>``s: |gear| × max|ctrlrange| (or forcerange)."""
-    limit = np.full(model.nv, np.inf)
-    for actuator in root.iter():
-        joint_name = actuator.get("joint")
-        if actuator.tag not in ("motor", "general") or joint_name is None:
-            continue
-        if not model.existJointName(joint_name):
-            raise ModelError(
-                f"actuator {actuator.get('name')!r} drives unknown joint {joint_name!r}"
-            )
-        joint = model.joints[model.getJointId(joint_name)]
-        gear = np.array([float(g) for g in actuator.get("gear", "1").split()])
-        bound = np.inf
-        for key in ("ctrlrange", "forcerange"):
-            if key in actuator.attrib:
-                # MuJoCo clamps the actuator force, then multiplies by the gear.
-                lo, hi = (float(x) for x in actuator.get(key, "").split())
-                bound = min(bound, np.max(np.abs(gear)) * max(abs(lo), abs(hi)))
-        axes = np.flatnonzero(gear[: joint.nv]) if gear.size > 1 else np.arange(joint.nv)
-        for axis in axes:
-            limit[joint.idx_v + axis] = bound
-    return limit[6:]
-
-
-def _mjcf_ball_swing_limits(root: ET.Element) -> dict[str, float]:
-    """Upper bound of ``range`` of every limited ball joint (MJCF: radians here)."""
-    limits = {}
-    for joint in root.iter("joint"):
-        if joint.get("type") == "ball" and "range" in joint.attrib:
-            limits[joint.get("name", "")] = float(joint.get("range", "0 0").split()[1])
-    return limits
-
-
-def _default_contacts(root: ET.Element, model: pin.Model) -> list[ContactSpec]:
-    """Contacts from ``*_sole`` box sites: the four corners of their x–y rectangle."""
-    specs = []
-    for site in root.iter("site"):
-        name = site.get("name", "")
-        if not name.endswith("_sole") or site.get("type") != "box":
-            continue
-        half_x, half_y = (float(s) for s in site.get("size", "0 0 0").split()[:2])
-        corners = [(sx * half_x, sy * half_y, 0.0) for sx in (1, -1) for sy in (1, -1)]
-        specs.append(
-            ContactSpec(
-                name=name.removesuffix("_sole") + "_foot", frame=name, points_in_frame=corners
-            )
-        )
-    return specs
-
-
-def _mjcf_root_body_position(root: ET.Element) -> np.ndarray:
-    """``pos`` of the first body under ``<worldbody>`` (zero if none)."""
-    body = root.find("./worldbody/body")
-    if body is None:
-        return np.zeros(3)
-    return np.array([float(x) for x in body.get("pos", "0 0 0").split()])
-
-
-def _parser_message(exc: Exception, path: Path, name: str) -> str:
-    """Pinocchio's message without server paths: the model's name for the file, no C++ trace.
-
-    Pinocchio prefixes its C++ source file, function and line (``From file:
-    … message:``); only the message is kept, the temporary file is named by
-    the model's name, and any other absolute path becomes ``<path>``.
-    """
-    text = str(exc)
-    _, marker, message = text.partition("message:")
-    text = message if marker else text
-    text = text.replace(str(path), repr(name))
-    return " ".join(_ABSOLUTE_PATH.sub("<path>", text).split())
-
-
-def _mjcf_has_free_joint(root: ET.Element) -> bool:
-    """Whether a body of the MJCF's world has a free joint, in either spelling.
-
-    ``<freejoint/>`` and ``<joint type="free"/>`` are the same joint to MuJoCo (and to
-    Pinocchio's parser); vendors write both.
-    """
-    world = root.find("worldbody")
-    if world is None:
-        return False
-    return any(
-        element.tag == "freejoint" or (element.tag == "joint" and element.get("type") == "free")
-        for element in world.iter()
-    )
-
-
-def _build_pinocchio(path: Path, fmt: str, name: str) -> pin.Model:
-    """Parse with Pinocchio, adding a free-flyer root where the file has none.
-
-    Raises:
-        ModelError: Pinocchio refused the file (message free of server paths).
-    """
-    try:
-        if fmt == "urdf":
-            return pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-        model = pin.buildModelFromMJCF(str(path))
-        if model.njoints < 2 or model.joints[1].shortname() != "JointModelFreeFlyer":
-            model, _ = pin.buildModelAndLegacyConstraintsFromMJCF(
-                str(path), pin.JointModelFreeFlyer(), "root"
-            )
-    except (RuntimeError, ValueError, IndexError) as exc:
-        detail = _parser_message(exc, path, name)
-        raise ModelError(f"Pinocchio could not parse the {fmt.upper()} file: {detail}") from None
-    return model
-
-
-def _resolve(contact: ContactSpec, model: pin.Model) -> Contact:
-    if not model.existFrame(contact.frame):
-        raise FrameNotFound(contact.frame, [f.name for f in model.frames])
+def _resolve(contact: FoundContact, model: pin.Model) -> Contact:
     return Contact(
         name=contact.name,
         frame_name=contact.frame,
         frame_id=model.getFrameId(contact.frame),
-        points_in_frame=np.array(contact.points_in_frame, dtype=float),
+        points_in_frame=contact.points_in_frame,
         friction_coefficient=contact.friction_coefficient,
     )
 
@@ -321,9 +239,14 @@ def _joint_infos(model: pin.Model, torque_limit: np.ndarray) -> tuple[JointInfo,
     return tuple(infos)
 
 
-def _hash(text: bytes, contacts: list[ContactSpec]) -> str:
+def _hash(text: bytes, files: dict[str, bytes], contacts: str, keyframe: str | None) -> str:
     digest = hashlib.sha256(text)
-    digest.update(_contacts_json(contacts).encode())
+    for path in sorted(files):
+        digest.update(f"\0{path}\0".encode())
+        digest.update(files[path])
+    digest.update(contacts.encode())
+    if keyframe is not None:
+        digest.update(f"\0keyframe\0{keyframe}".encode())
     return digest.hexdigest()
 
 
@@ -332,9 +255,15 @@ def load_robot_model(
     *,
     model_text: str | None = None,
     model_format: str = "mjcf",
+    model_assets: dict[str, bytes] | None = None,
     contacts: list[ContactSpec] | None = None,
+    keyframe: str | None = None,
 ) -> RobotModel:
     """Load a robot from a built-in name, a file in the model directories, or file text.
+
+    The file is read as its vendor wrote it (:mod:`controller_server.models.description`):
+    the files it names (includes, meshes) come from beside it in the model
+    directories, or for ``model_text`` from ``model_assets`` only.
 
     Args:
         model: Built-in name (see :data:`BUILTIN_MODELS`) or path of a file in
@@ -342,7 +271,10 @@ def load_robot_model(
             robot's name is then the file's stem.
         model_text: Text of an MJCF/URDF file (instead of ``model``).
         model_format: ``"mjcf"`` or ``"urdf"``; a path ending in ``.urdf`` is URDF.
-        contacts: Contact definitions; default: the MJCF's ``*_sole`` box sites.
+        model_assets: Files ``model_text`` names, by the path it names them with.
+        contacts: Contact definitions; default: ``*_sole`` box sites, else the
+            feet found from the collision geometry.
+        keyframe: MJCF keyframe of the standing pose (default: the file's pose).
 
     Returns:
         The model, cached: the same inputs give the same object while they are
@@ -350,21 +282,54 @@ def load_robot_model(
 
     Raises:
         ModelError: Not found (one message whatever the reason), not
-            parseable, unsupported joints or no contacts.
+            parseable, unsupported joints, no contacts or no such keyframe.
         FileTooLarge: A file over the size cap.
     """
     if model_text is not None:
         text = model_text.encode()
         name = "client_model"
+        files = dict(model_assets or {})
+        read = _reader(files)
     elif model is not None:
         path, text = MODEL_FILES.read_bytes(model)
         name = model if model in BUILTIN_MODELS else Path(model).stem
         if path.suffix.lower() == ".urdf":
             model_format = "urdf"
+        read = _server_reader(path.parent)
     else:
         raise ModelError("no model given: set `model` or `model_text`")
+    # Every file the model names is read now, so the cache key covers them all.
+    try:
+        files = gather_files(text, model_format, read)
+    except DescriptionError as exc:
+        raise ModelError(str(exc)) from None
     contacts_json = None if contacts is None else _contacts_json(contacts)
-    return _load_cached(text, name, model_format, contacts_json)
+    return _load_cached(
+        text, tuple(sorted(files.items())), name, model_format, contacts_json, keyframe
+    )
+
+
+def _reader(files: dict[str, bytes]) -> Callable[[str], bytes]:
+    def read(path: str) -> bytes:
+        if path not in files:
+            raise KeyError(f"not among the {len(files)} files sent with the model")
+        return files[path]
+
+    return read
+
+
+def _server_reader(directory: Path) -> Callable[[str], bytes]:
+    """Reads what a model in ``directory`` names, only from the model directories."""
+
+    def read(relative: str) -> bytes:
+        try:
+            return MODEL_ASSET_FILES.read_bytes(str(directory / relative))[1]
+        except ServerFault as exc:
+            raise DescriptionError(
+                f"{relative!r} is not a readable file in the server's model directories ({exc.detail})"
+            ) from None
+
+    return read
 
 
 def _contacts_json(contacts: list[ContactSpec]) -> str:
@@ -386,64 +351,46 @@ def set_model_cache_size(size: int) -> None:
     _load_cached = lru_cache(maxsize=size)(_load_uncached)
 
 
-def _load_uncached(text: bytes, name: str, fmt: str, contacts_json: str | None) -> RobotModel:
+def _load_uncached(
+    text: bytes,
+    files: tuple[tuple[str, bytes], ...],
+    name: str,
+    fmt: str,
+    contacts_json: str | None,
+    keyframe: str | None,
+) -> RobotModel:
     contacts = (
         None
         if contacts_json is None
         else [ContactSpec.model_validate(c) for c in json.loads(contacts_json)]
     )
-    # Well-formed XML first: the C++ parsers are not the place to find garbage.
     try:
-        root = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise ModelError(f"invalid XML: {exc}") from None
-    # Pinocchio parses files, so the text goes through a private temporary file.
-    with tempfile.TemporaryDirectory(prefix="poise-model-") as tmp:
-        path = Path(tmp) / f"model.{'urdf' if fmt == 'urdf' else 'xml'}"
-        path.write_bytes(text)
-        os.chmod(path, 0o600)
-        model = _build_pinocchio(path, fmt, name)
-    # The wire's base position is the root body's world position (as MuJoCo's
-    # free-joint qpos). Pinocchio keeps an MJCF root body's position in the
-    # reference configuration "qpos0", a URDF root offset (if any) in the
-    # joint placement; both become the standing base position.
-    standing_position = model.jointPlacements[1].translation.copy()
-    if "qpos0" in model.referenceConfigurations:
-        standing_position += model.referenceConfigurations["qpos0"][:3]
-    model.jointPlacements[1] = pin.SE3.Identity()
-    if fmt == "mjcf":
-        if not _mjcf_has_free_joint(root):
-            # Pinocchio drops the root body's position when it adds the free flyer.
-            standing_position = standing_position + _mjcf_root_body_position(root)
-        torque_limit = _mjcf_torque_limits(root, model)
-        swing_limits = _mjcf_ball_swing_limits(root)
-        specs = list(contacts) if contacts is not None else _default_contacts(root, model)
-    else:
-        swing_limits = {}
-        torque_limit = np.asarray(model.effortLimit[6:], dtype=float).copy()
-        torque_limit[torque_limit <= 0] = np.inf
-        specs = list(contacts or [])
-    if not specs:
-        raise ModelError(
-            "the model defines no contacts: add `*_sole` box sites (MJCF) or send `contacts`",
-            field="contacts",
+        description = describe(
+            text, fmt, read=_reader(dict(files)), name=name, contacts=contacts, keyframe=keyframe
         )
+    except FrameNotFoundError as exc:
+        raise FrameNotFound(exc.frame, exc.available) from None
+    except DescriptionError as exc:
+        raise ModelError(str(exc), field=exc.field) from None
+    model = description.model
+    torque_limit = description.torque_limit
     model.effortLimit[6:] = torque_limit
-    torque_limit.setflags(write=False)
-    standing_position.setflags(write=False)
-    resolved = tuple(_resolve(spec, model) for spec in specs)
+    specs = [c.to_spec() for c in description.contacts]
     joints = _joint_infos(model, torque_limit)
     return RobotModel(
         name=name,
         model=model,
-        model_hash=_hash(text, specs),
+        model_hash=_hash(text, dict(files), _contacts_json(specs), keyframe),
         joints=joints,
-        contacts=resolved,
+        contacts=tuple(_resolve(c, model) for c in description.contacts),
         torque_limit=torque_limit,
-        standing_position_base_in_world=standing_position,
+        standing_configuration=description.standing_configuration,
         ball_swing_limit={
-            info.name: swing_limits.get(info.name, np.pi) for info in joints if info.kind == "ball"
+            info.name: description.ball_swing_limit.get(info.name, np.pi)
+            for info in joints
+            if info.kind == "ball"
         },
+        description=description,
     )
 
 

@@ -1,0 +1,962 @@
+"""A robot as its vendor's file describes it: one reading shared by the server and the simulators.
+
+MJCF goes through MuJoCo's own compiler, which resolves what vendors write:
+``<include>``\\ d robot files under a ``scene.xml``, ``<default>`` classes,
+both free-joint spellings, meshes, ``autolimits``, extra root bodies
+(cameras, mocap targets, props). The Pinocchio model is then built from the
+*compiled* MuJoCo model, body by body, so the server's dynamics are the
+simulator's to the last inertia. URDF is read by Pinocchio's parser.
+
+Files are never opened here: every ``<include>`` and asset path goes through
+a ``read`` callable (the server's confines reads to its model directories,
+a client-sent model reads only the files it sent), and MuJoCo compiles from
+memory, so it cannot open a file the caller did not hand over.
+
+From the model, a :class:`RobotDescription` finds:
+
+* **Contacts.** ``*_sole`` box sites if the file has them (the corners of the
+  site's x–y rectangle, as the built-in robots); otherwise the feet are found
+  from the collision geometry: at the standing pose, the bodies whose
+  collision geoms reach within :data:`FOOT_HEIGHT_TOLERANCE_M` of the lowest
+  point are the feet (a foot's descendants are part of it), and each foot's
+  sole is the rectangle, aligned with the foot's heading, around its
+  collision points within :data:`SOLE_HEIGHT_TOLERANCE_M` of its lowest one.
+  A contact may instead be named (a frame without points): its sole is found
+  the same way from that frame's body and its descendants.
+* **Torque limits** from every place a file states them: MJCF actuator
+  ``forcerange``, a motor's ``ctrlrange`` × gain, × |gear|, and the joint's
+  ``actuatorfrcrange`` (defaults classes included, being compiled); URDF
+  ``<limit effort>``.
+* **Actuator kinds** per joint (``motor``, ``position``, ``velocity``,
+  ``general``, or ``none``), so that a simulator can convert
+  position-actuated models to torque motors instead of misusing them.
+* **The standing pose**: a keyframe by name, or the file's reference pose,
+  lifted or lowered so that the lowest contact point is at z = 0.
+"""
+
+from __future__ import annotations
+
+import difflib
+import posixpath
+import xml.etree.ElementTree as ET
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import PurePosixPath
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from protocol.messages import ContactSpec
+
+__all__ = [
+    "FOOT_HEIGHT_TOLERANCE_M",
+    "SOLE_HEIGHT_TOLERANCE_M",
+    "DescriptionError",
+    "FileReader",
+    "FoundContact",
+    "FrameNotFoundError",
+    "RobotDescription",
+    "compile_mjcf",
+    "describe",
+    "expand_mjcf",
+    "gather_files",
+]
+
+FOOT_HEIGHT_TOLERANCE_M = 0.02
+"""A body whose collision geometry reaches this close to the lowest point (standing) is a foot."""
+SOLE_HEIGHT_TOLERANCE_M = 0.005
+"""A foot's collision points this close to its lowest point span its sole."""
+MAX_INCLUDE_DEPTH = 16
+"""Deepest chain of ``<include>``\\ s followed."""
+
+FileReader = Callable[[str], bytes]
+"""Reads a file named by a model: a path relative to the main file's directory (POSIX)."""
+
+_ASSET_DIRECTORY = {
+    "mesh": "meshdir",
+    "skin": "meshdir",
+    "hfield": "meshdir",
+    "texture": "texturedir",
+}
+_FREE = int(mujoco.mjtJoint.mjJNT_FREE)
+_BALL = int(mujoco.mjtJoint.mjJNT_BALL)
+_HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
+_SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
+_TRN_JOINT = int(mujoco.mjtTrn.mjTRN_JOINT)
+_GAIN_FIXED = int(mujoco.mjtGain.mjGAIN_FIXED)
+_BIAS_NONE = int(mujoco.mjtBias.mjBIAS_NONE)
+_BIAS_AFFINE = int(mujoco.mjtBias.mjBIAS_AFFINE)
+_GEOM = mujoco.mjtGeom
+_UNIT_AXES = {(1.0, 0.0, 0.0): "X", (0.0, 1.0, 0.0): "Y", (0.0, 0.0, 1.0): "Z"}
+
+
+class DescriptionError(ValueError):
+    """The model cannot be used as written; the message says what to change, on one line.
+
+    Attributes:
+        field: What to change: ``model`` (the file), ``contacts`` or ``keyframe``.
+    """
+
+    def __init__(self, message: str, *, field: str = "model"):
+        super().__init__(message)
+        self.field = field
+
+
+class FrameNotFoundError(DescriptionError):
+    """A contact names a frame the model does not have."""
+
+    def __init__(self, frame: str, available: list[str]):
+        self.frame = frame
+        self.available = available
+        close = difflib.get_close_matches(frame, available, n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        super().__init__(
+            f"no frame {frame!r} in the model; {hint}frames: {', '.join(available)}",
+            field="contacts",
+        )
+
+
+def gather_files(text: bytes | str, fmt: str, read: FileReader | None) -> dict[str, bytes]:
+    """Every file the model names, read now (by the path :func:`describe` will ask for).
+
+    MJCF: includes (recursively) and assets; a file that cannot be read is an
+    error. URDF: collision meshes that can be read (the others are skipped by
+    :func:`describe` with a warning).
+
+    Raises:
+        DescriptionError: An MJCF names a file that cannot be read, or is not XML.
+    """
+    files: dict[str, bytes] = {}
+
+    def recording(path: str) -> bytes:
+        if read is None:
+            raise KeyError("no file was given with the model")
+        files[path] = read(path)
+        return files[path]
+
+    if fmt == "urdf":
+        for mesh in _parse_xml(text, "the URDF").iter("mesh"):
+            try:
+                recording(_urdf_mesh_path(mesh.get("filename", "")))
+            except (OSError, KeyError, ValueError):
+                continue
+    else:
+        expand_mjcf(text, recording if read is not None else None)
+    return files
+
+
+# -- MJCF through MuJoCo's compiler ------------------------------------------------------
+
+
+def expand_mjcf(text: bytes | str, read: FileReader | None) -> tuple[str, dict[str, bytes]]:
+    """One MJCF document with every include inlined and every file handed over in memory.
+
+    ``<include file>`` is replaced by the included ``<mujoco>``'s children (paths
+    relative to the main file's directory, as MuJoCo resolves them). Every
+    attribute naming a file (``file``, a cube texture's ``fileright`` …) is
+    read through ``read`` — meshes, skins and height fields under
+    ``meshdir``, textures under ``texturedir`` (or ``assetdir``) — and
+    replaced by a key of the returned assets, so MuJoCo compiles from memory.
+
+    Args:
+        text: The main MJCF file.
+        read: Reads a file named relative to the main file's directory;
+            ``None``: the model may name no file.
+
+    Returns:
+        The expanded XML and the assets by key.
+
+    Raises:
+        DescriptionError: Not XML, not ``<mujoco>``, an include cycle or chain
+            deeper than :data:`MAX_INCLUDE_DEPTH`, a plugin, or a file that
+            cannot be read.
+    """
+    root = _parse_xml(text, "the model")
+    if root.tag != "mujoco":
+        raise DescriptionError(f"an MJCF file's root element is <mujoco>, not <{root.tag}>")
+    _inline_includes(root, read, depth=0, chain=())
+    if root.find(".//plugin") is not None or root.find(".//extension") is not None:
+        raise DescriptionError("MuJoCo plugins (<extension>, <plugin>) are not supported")
+    directories = {"meshdir": "", "texturedir": ""}
+    strip_paths = False
+    for compiler in root.iter("compiler"):
+        if "assetdir" in compiler.attrib:
+            directories = dict.fromkeys(directories, compiler.attrib.pop("assetdir"))
+        for key in directories:
+            if key in compiler.attrib:
+                directories[key] = compiler.attrib.pop(key)
+        strip_paths = compiler.get("strippath", str(strip_paths).lower()) == "true"
+        compiler.attrib.pop("strippath", None)
+    assets: dict[str, bytes] = {}
+    keys: dict[str, str] = {}
+    for element in root.iter():
+        for attribute, value in list(element.attrib.items()):
+            if not attribute.startswith("file"):
+                continue
+            name = posixpath.basename(value) if strip_paths else value
+            directory = directories.get(_ASSET_DIRECTORY.get(element.tag, ""), "")
+            path = posixpath.normpath(posixpath.join(directory, name))
+            if path not in keys:
+                keys[path] = f"poise_asset_{len(keys)}{PurePosixPath(path).suffix.lower()}"
+                assets[keys[path]] = _read(read, path, f"<{element.tag} {attribute}>")
+            element.set(attribute, keys[path])
+    return ET.tostring(root, encoding="unicode"), assets
+
+
+def _parse_xml(text: bytes | str, what: str) -> ET.Element:
+    try:
+        return ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise DescriptionError(f"{what} is not valid XML: {exc}") from None
+
+
+def _read(read: FileReader | None, path: str, what: str) -> bytes:
+    if read is None:
+        raise DescriptionError(
+            f"{what} names the file {path!r}, and no file was given with the model "
+            "(send it in `model_assets`, or load the model from a file)"
+        )
+    try:
+        return read(path)
+    except DescriptionError:
+        raise
+    except (OSError, KeyError, ValueError) as exc:
+        raise DescriptionError(f"{what} names {path!r}, which cannot be read: {exc}") from None
+
+
+def _inline_includes(
+    element: ET.Element, read: FileReader | None, depth: int, chain: tuple[str, ...]
+) -> None:
+    for index, child in enumerate(list(element)):
+        if child.tag != "include":
+            _inline_includes(child, read, depth, chain)
+            continue
+        path = posixpath.normpath(child.get("file", ""))
+        if path in chain or depth >= MAX_INCLUDE_DEPTH:
+            raise DescriptionError(f"<include> chain {' → '.join((*chain, path))} does not end")
+        included = _parse_xml(_read(read, path, "<include file>"), f"included file {path!r}")
+        if included.tag != "mujoco":
+            raise DescriptionError(f"included file {path!r} must have a <mujoco> root element")
+        _inline_includes(included, read, depth + 1, (*chain, path))
+        element.remove(child)
+        for offset, grandchild in enumerate(list(included)):
+            element.insert(index + offset, grandchild)
+        # The inserted children were expanded above; the loop goes on with the originals.
+
+
+def compile_mjcf(
+    text: bytes | str, read: FileReader | None
+) -> tuple[mujoco.MjSpec, mujoco.MjModel]:
+    """The MJCF, includes and assets resolved (:func:`expand_mjcf`), parsed and compiled by MuJoCo.
+
+    Returns:
+        The spec (for a simulator's edits before its own compile) and the model.
+
+    Raises:
+        DescriptionError: :func:`expand_mjcf`'s, or MuJoCo's message on one line.
+    """
+    xml, assets = expand_mjcf(text, read)
+    try:
+        spec = mujoco.MjSpec.from_string(xml, assets=assets)
+        return spec, spec.compile()
+    except ValueError as exc:
+        detail = " ".join(str(exc).split())
+        raise DescriptionError(f"MuJoCo could not compile the model: {detail}") from None
+
+
+# -- the description ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FoundContact:
+    """A support: a frame of the model and the corners of its sole in that frame (m)."""
+
+    name: str
+    frame: str
+    points_in_frame: np.ndarray
+    friction_coefficient: float = 0.8
+
+    def to_spec(self) -> ContactSpec:
+        """The wire description of this contact."""
+        return ContactSpec(
+            name=self.name,
+            frame=self.frame,
+            points_in_frame=[tuple(float(c) for c in p) for p in self.points_in_frame],
+            friction_coefficient=self.friction_coefficient,
+        )
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body of the robot: its Pinocchio frame, parent body and collision points.
+
+    Attributes:
+        name: Body (MJCF) or link (URDF) name; its Pinocchio frame's name.
+        parent: Index of the parent body in :attr:`RobotDescription.bodies` (−1: the root).
+        frame_id: Pinocchio frame of the body.
+        collision_points: ``(k, 3)`` points of its collision geometry in the
+            body frame (m): box and mesh vertices, sphere, capsule, cylinder and
+            ellipsoid extremes along their axes and rims.
+    """
+
+    name: str
+    parent: int
+    frame_id: int
+    collision_points: np.ndarray
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    """What Poise reads from a robot file (see the module docstring).
+
+    Attributes:
+        name: Model name.
+        format: ``"mjcf"`` or ``"urdf"``.
+        model: Pinocchio model, joint 1 the free-flyer root with an identity placement.
+        bodies: The robot's bodies (root first, parents before children).
+        contacts: Supports in ``contact_flags`` order.
+        torque_limit: ``(nv − 6,)`` symmetric limits (N·m, N; ``inf``: none stated).
+        actuator_kind: Joint name → ``motor``, ``position``, ``velocity``,
+            ``general`` (MJCF), ``effort`` (URDF) or ``none``.
+        ball_swing_limit: Ball joint name → largest swing (rad; π where unlimited).
+        standing_configuration: Pinocchio ``q`` of the standing pose, soles at z = 0.
+        keyframes: Names of the file's keyframes.
+        keyframe: The keyframe the standing pose comes from (``None``: the file's pose).
+        warnings: What a user should know (unactuated joints, converted actuators …).
+    """
+
+    name: str
+    format: str
+    model: pin.Model
+    bodies: tuple[Body, ...]
+    contacts: tuple[FoundContact, ...]
+    torque_limit: np.ndarray
+    actuator_kind: dict[str, str]
+    ball_swing_limit: dict[str, float]
+    standing_configuration: np.ndarray
+    keyframes: tuple[str, ...]
+    keyframe: str | None
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def joint_names(self) -> list[str]:
+        """Actuated joints in wire (Pinocchio) order."""
+        return list(self.model.names[2:])
+
+    @property
+    def total_mass(self) -> float:
+        """Total mass (kg)."""
+        return float(sum(inertia.mass for inertia in self.model.inertias))
+
+
+@dataclass
+class _Draft:
+    """What a format's reader gives :func:`describe` to finish."""
+
+    model: pin.Model
+    bodies: list[Body]
+    torque_limit: np.ndarray
+    actuator_kind: dict[str, str]
+    ball_swing_limit: dict[str, float]
+    configuration: np.ndarray
+    keyframes: dict[str, np.ndarray]
+    sole_sites: list[FoundContact]
+    warnings: list[str]
+
+
+def describe(
+    text: bytes | str,
+    fmt: str = "mjcf",
+    *,
+    read: FileReader | None = None,
+    name: str = "robot",
+    contacts: Sequence[ContactSpec] | None = None,
+    keyframe: str | None = None,
+) -> RobotDescription:
+    """Read a robot file (see the module docstring).
+
+    Args:
+        text: The main MJCF or URDF file.
+        fmt: ``"mjcf"`` or ``"urdf"``.
+        read: Reads the files the model names (includes, meshes), relative to
+            the main file's directory.
+        name: Model name.
+        contacts: Contacts to use instead of the found ones; one without
+            points gets its sole found from its frame's body.
+        keyframe: Keyframe whose pose is the standing pose (MJCF).
+
+    Raises:
+        DescriptionError: What to change, on one line.
+    """
+    draft = _read_urdf(text, read, name) if fmt == "urdf" else _read_mjcf(text, read)
+    model = draft.model
+    if keyframe is not None:
+        if keyframe not in draft.keyframes:
+            known = ", ".join(draft.keyframes) or "none"
+            raise DescriptionError(
+                f"no keyframe {keyframe!r} in the model; keyframes: {known}", field="keyframe"
+            )
+        draft.configuration = draft.keyframes[keyframe].copy()
+    q = draft.configuration
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    if contacts is not None:
+        found = [_named_contact(spec, model, data, draft.bodies) for spec in contacts]
+    elif draft.sole_sites:
+        found = draft.sole_sites
+    else:
+        found = _find_feet(model, data, draft.bodies)
+    if not found:
+        raise DescriptionError("no contacts: name the feet (`contacts`)", field="contacts")
+    lowest = min(
+        float(_to_world(data.oMf[model.getFrameId(c.frame)], c.points_in_frame)[:, 2].min())
+        for c in found
+    )
+    q[2] -= lowest
+    q.setflags(write=False)
+    draft.torque_limit.setflags(write=False)
+    return RobotDescription(
+        name=name,
+        format=fmt,
+        model=model,
+        bodies=tuple(draft.bodies),
+        contacts=tuple(found),
+        torque_limit=draft.torque_limit,
+        actuator_kind=draft.actuator_kind,
+        ball_swing_limit=draft.ball_swing_limit,
+        standing_configuration=q,
+        keyframes=tuple(draft.keyframes),
+        keyframe=keyframe,
+        warnings=tuple(draft.warnings),
+    )
+
+
+def _read_mjcf(text: bytes | str, read: FileReader | None) -> _Draft:
+    _, mj = compile_mjcf(text, read)
+    root = _robot_root(mj)
+    builder = _PinocchioFromMujoco(mj, root)
+    model = builder.model
+    torque_limit, kinds, warnings = _mjcf_actuation(mj, model, builder.joints)
+    return _Draft(
+        model=model,
+        bodies=builder.bodies,
+        torque_limit=torque_limit,
+        actuator_kind=kinds,
+        ball_swing_limit={
+            mj.joint(j).name: float(mj.jnt_range[j, 1]) if mj.jnt_limited[j] else np.pi
+            for j in builder.joints
+            if mj.jnt_type[j] == _BALL
+        },
+        configuration=builder.configuration(mj.qpos0),
+        keyframes={
+            mj.key(k).name or f"key{k}": builder.configuration(mj.key_qpos[k])
+            for k in range(mj.nkey)
+        },
+        sole_sites=builder.sole_sites(),
+        warnings=warnings,
+    )
+
+
+def _robot_root(mj: mujoco.MjModel) -> int:
+    """The body under the world that is the robot: the one with a free joint, else the most DoFs.
+
+    Raises:
+        DescriptionError: No body has a joint, or several have free joints.
+    """
+    roots = [b for b in range(1, mj.nbody) if mj.body_parentid[b] == 0]
+    free = [b for b in roots if any(mj.jnt_type[j] == _FREE for j in _body_joints(mj, b))]
+    if len(free) > 1:
+        names = ", ".join(mj.body(b).name or f"body{b}" for b in free)
+        raise DescriptionError(
+            f"several bodies have a free joint ({names}); Poise controls one robot per model"
+        )
+    if free:
+        return free[0]
+    dofs = {
+        b: int(sum(mj.body_dofnum[d] for d in range(mj.nbody) if mj.body_rootid[d] == b))
+        for b in roots
+    }
+    if not dofs or max(dofs.values()) == 0:
+        raise DescriptionError("the model has no body with joints under <worldbody>")
+    return max(dofs, key=lambda b: dofs[b])
+
+
+def _body_joints(mj: mujoco.MjModel, body: int) -> range:
+    start = int(mj.body_jntadr[body])
+    return range(start, start + int(mj.body_jntnum[body])) if start >= 0 else range(0)
+
+
+def _se3(position: np.ndarray, quaternion_wxyz: np.ndarray) -> pin.SE3:
+    w, x, y, z = quaternion_wxyz
+    return pin.SE3(pin.Quaternion(w, x, y, z).normalized().matrix(), np.array(position, float))
+
+
+class _PinocchioFromMujoco:
+    """Builds a Pinocchio model from a compiled MuJoCo model, body by body.
+
+    A MuJoCo joint at anchor ``p`` of its body (axis in the body frame) moves
+    the body by ``T(p) · motion · T(−p)``; several joints of one body chain in
+    document order. Each becomes a Pinocchio joint placed at ``T(p)``
+    (relative to the previous joint of the chain: ``T(−p_prev) T(p)``), and
+    the body — inertia, frame, sites — hangs from the last one at ``T(−p)``.
+    Bodies without joints are welded to their parent's joint.
+    """
+
+    def __init__(self, mj: mujoco.MjModel, root: int):
+        self.mj = mj
+        self.model = pin.Model()
+        self.model.name = mj.names[: mj.names.find(b"\0")].decode() if mj.names else "robot"
+        self.joints: list[int] = []  # MuJoCo joint ids in Pinocchio order (free root excluded)
+        self.bodies: list[Body] = []
+        self._body_index: dict[int, int] = {}
+        self._placement: dict[int, tuple[int, pin.SE3]] = {}  # body → (pin joint, body in joint)
+        self._site_frames: list[tuple[int, int]] = []  # (site id, frame id)
+        self.root = root
+        gravity = mj.opt.gravity
+        self.model.gravity = pin.Motion(np.array(gravity, float), np.zeros(3))
+        free = [j for j in _body_joints(mj, root) if mj.jnt_type[j] == _FREE]
+        self.root_pose = _se3(mj.body_pos[root], mj.body_quat[root])
+        self._free_qpos = int(mj.jnt_qposadr[free[0]]) if free else None
+        joint_name = mj.joint(free[0]).name if free and mj.joint(free[0]).name else "root_joint"
+        joint = self.model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), joint_name)
+        self.model.addJointFrame(joint, 0)
+        self._add_body(root, joint, pin.SE3.Identity(), skip_free=True)
+        for body in range(root + 1, mj.nbody):
+            if mj.body_rootid[body] == root:
+                parent_joint, parent_in_joint = self._placement[int(mj.body_parentid[body])]
+                offset = _se3(mj.body_pos[body], mj.body_quat[body])
+                self._add_body(body, parent_joint, parent_in_joint * offset, skip_free=False)
+
+    def _add_body(self, body: int, joint: int, body_in_joint: pin.SE3, *, skip_free: bool) -> None:
+        mj, model = self.mj, self.model
+        anchor = np.zeros(3)
+        for j in _body_joints(mj, body):
+            kind = int(mj.jnt_type[j])
+            if kind == _FREE:
+                if skip_free:
+                    continue
+                raise DescriptionError(f"free joint {mj.joint(j).name!r} is not on the root body")
+            placement = (
+                body_in_joint * pin.SE3(np.eye(3), -anchor) * pin.SE3(np.eye(3), mj.jnt_pos[j])
+            )
+            name = mj.joint(j).name
+            if not name:
+                raise DescriptionError(
+                    f"a joint of body {mj.body(body).name!r} has no name; name every joint"
+                )
+            joint = model.addJoint(joint, _joint_model(kind, mj.jnt_axis[j]), placement, name)
+            model.addJointFrame(joint, -1)
+            v = model.joints[joint].idx_v
+            model.armature[v : v + model.joints[joint].nv] = mj.dof_armature[
+                mj.jnt_dofadr[j] : mj.jnt_dofadr[j] + model.joints[joint].nv
+            ]
+            if kind in (_HINGE, _SLIDE):
+                limited = bool(mj.jnt_limited[j])
+                q = model.joints[joint].idx_q
+                model.lowerPositionLimit[q] = mj.jnt_range[j, 0] if limited else -np.inf
+                model.upperPositionLimit[q] = mj.jnt_range[j, 1] if limited else np.inf
+            self.joints.append(j)
+            anchor = np.array(mj.jnt_pos[j], float)
+            body_in_joint = pin.SE3.Identity()
+        body_in_joint = body_in_joint * pin.SE3(np.eye(3), -anchor)
+        rotation = pin.Quaternion(*mj.body_iquat[body]).normalized().matrix()
+        inertia = pin.Inertia(
+            float(mj.body_mass[body]),
+            np.array(mj.body_ipos[body], float),
+            rotation @ np.diag(mj.body_inertia[body]) @ rotation.T,
+        )
+        model.appendBodyToJoint(joint, inertia, body_in_joint)
+        name = mj.body(body).name or f"body{body}"
+        parent_frame = model.getFrameId(model.names[joint], pin.JOINT)
+        frame = model.addBodyFrame(name, joint, body_in_joint, parent_frame)
+        for site in range(mj.nsite):
+            if mj.site_bodyid[site] == body and mj.site(site).name:
+                placement = body_in_joint * _se3(mj.site_pos[site], mj.site_quat[site])
+                frame_id = model.addFrame(
+                    pin.Frame(mj.site(site).name, joint, frame, placement, pin.OP_FRAME)
+                )
+                self._site_frames.append((site, frame_id))
+        self._placement[body] = (joint, body_in_joint)
+        parent = self._body_index.get(int(mj.body_parentid[body]), -1)
+        self._body_index[body] = len(self.bodies)
+        self.bodies.append(Body(name, parent, frame, _geom_points(mj, body)))
+
+    def configuration(self, qpos: np.ndarray) -> np.ndarray:
+        """Pinocchio ``q`` from a MuJoCo ``qpos`` (base from the free joint, or the body's pose)."""
+        mj, model = self.mj, self.model
+        q = np.zeros(model.nq)
+        if self._free_qpos is None:
+            q[:3] = self.root_pose.translation
+            q[3:7] = pin.Quaternion(self.root_pose.rotation).coeffs()
+        else:
+            a = self._free_qpos
+            q[:3] = qpos[a : a + 3]
+            w, x, y, z = qpos[a + 3 : a + 7]
+            q[3:7] = (x, y, z, w)
+        for pin_joint, j in enumerate(self.joints, start=2):
+            idx, a = model.joints[pin_joint].idx_q, int(mj.jnt_qposadr[j])
+            if mj.jnt_type[j] == _BALL:
+                w, x, y, z = qpos[a : a + 4]
+                q[idx : idx + 4] = (x, y, z, w)
+            else:
+                q[idx] = qpos[a]
+        for start in [
+            3,
+            *(model.joints[i].idx_q for i in range(2, model.njoints) if model.joints[i].nq == 4),
+        ]:
+            q[start : start + 4] /= np.linalg.norm(q[start : start + 4])
+        return q
+
+    def sole_sites(self) -> list[FoundContact]:
+        """Contacts from ``*_sole`` box sites: the four corners of their x–y rectangle."""
+        mj = self.mj
+        found = []
+        for site, _ in self._site_frames:
+            name = mj.site(site).name
+            if name.endswith("_sole") and mj.site_type[site] == _GEOM.mjGEOM_BOX:
+                half_x, half_y = mj.site_size[site, :2]
+                corners = [(sx * half_x, sy * half_y, 0.0) for sx in (1, -1) for sy in (1, -1)]
+                found.append(
+                    FoundContact(name.removesuffix("_sole") + "_foot", name, np.array(corners))
+                )
+        return found
+
+
+def _joint_model(kind: int, axis: np.ndarray) -> pin.JointModel:
+    if kind == _BALL:
+        return pin.JointModelSpherical()
+    unit = tuple(float(round(a, 12)) for a in axis)
+    letter = _UNIT_AXES.get(unit)
+    if kind == _HINGE:
+        return (
+            getattr(pin, f"JointModelR{letter}")()
+            if letter
+            else pin.JointModelRevoluteUnaligned(np.array(axis, float))
+        )
+    return (
+        getattr(pin, f"JointModelP{letter}")()
+        if letter
+        else pin.JointModelPrismaticUnaligned(np.array(axis, float))
+    )
+
+
+def _geom_points(mj: mujoco.MjModel, body: int) -> np.ndarray:
+    """Collision points of a body's colliding geoms, in the body frame."""
+    points = []
+    for geom in range(mj.ngeom):
+        if mj.geom_bodyid[geom] != body or not (mj.geom_contype[geom] or mj.geom_conaffinity[geom]):
+            continue
+        local = _shape_points(int(mj.geom_type[geom]), mj.geom_size[geom], _mesh_vertices(mj, geom))
+        if local is not None:
+            placement = _se3(mj.geom_pos[geom], mj.geom_quat[geom])
+            points.append(local @ placement.rotation.T + placement.translation)
+    return np.vstack(points) if points else np.zeros((0, 3))
+
+
+def _mesh_vertices(mj: mujoco.MjModel, geom: int) -> np.ndarray | None:
+    mesh = int(mj.geom_dataid[geom])
+    if mj.geom_type[geom] != _GEOM.mjGEOM_MESH or mesh < 0:
+        return None
+    start, count = int(mj.mesh_vertadr[mesh]), int(mj.mesh_vertnum[mesh])
+    return np.array(mj.mesh_vert[start : start + count], float)
+
+
+def _shape_points(kind: int, size: np.ndarray, vertices: np.ndarray | None) -> np.ndarray | None:
+    """Points of a primitive in its own frame: vertices, axis extremes and rims (``None``: a plane)."""
+    axes = np.vstack([np.eye(3), -np.eye(3)])
+    rim = np.array(
+        [(np.cos(a), np.sin(a), 0.0) for a in np.linspace(0, 2 * np.pi, 16, endpoint=False)]
+    )
+    if kind == _GEOM.mjGEOM_BOX:
+        return np.array([(sx, sy, sz) for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)]) * size
+    if kind == _GEOM.mjGEOM_SPHERE:
+        return axes * size[0]
+    if kind == _GEOM.mjGEOM_ELLIPSOID:
+        return axes * np.tile(size[:3], 2)
+    if kind == _GEOM.mjGEOM_CAPSULE:
+        return np.vstack([axes * size[0] + (0, 0, h) for h in (size[1], -size[1])])
+    if kind == _GEOM.mjGEOM_CYLINDER:
+        return np.vstack([rim * size[0] + (0, 0, h) for h in (size[1], -size[1])])
+    if kind == _GEOM.mjGEOM_MESH and vertices is not None:
+        return vertices
+    return None
+
+
+def _mjcf_actuation(
+    mj: mujoco.MjModel, model: pin.Model, joints: list[int]
+) -> tuple[np.ndarray, dict[str, str], list[str]]:
+    """Torque limits per DoF, actuator kind per joint, and warnings (see the module docstring)."""
+    limit = np.zeros(model.nv)
+    actuated = np.zeros(model.nv, dtype=bool)
+    pin_joint = {j: model.getJointId(mj.joint(j).name) for j in joints}
+    kinds: dict[str, str] = {mj.joint(j).name: "none" for j in joints}
+    for actuator in range(mj.nu):
+        j = int(mj.actuator_trnid[actuator, 0])
+        if mj.actuator_trntype[actuator] != _TRN_JOINT or j not in pin_joint:
+            continue
+        kind = _actuator_kind(mj, actuator)
+        name = mj.joint(j).name
+        kinds[name] = kind if kinds[name] in ("none", kind) else "general"
+        bound = np.inf
+        if mj.actuator_forcelimited[actuator]:
+            bound = float(np.abs(mj.actuator_forcerange[actuator]).max())
+        if kind == "motor" and mj.actuator_ctrllimited[actuator]:
+            gain = abs(float(mj.actuator_gainprm[actuator, 0]))
+            bound = min(bound, gain * float(np.abs(mj.actuator_ctrlrange[actuator]).max()))
+        joint = model.joints[pin_joint[j]]
+        gear = np.abs(mj.actuator_gear[actuator, : joint.nv])
+        dofs = slice(joint.idx_v, joint.idx_v + joint.nv)
+        limit[dofs] += np.where(gear > 0, bound * gear, 0.0)
+        actuated[dofs] |= gear > 0
+    limit[~actuated] = np.inf
+    for j, pin_id in pin_joint.items():
+        if mj.jnt_actfrclimited[j]:
+            joint = model.joints[pin_id]
+            dofs = slice(joint.idx_v, joint.idx_v + joint.nv)
+            limit[dofs] = np.minimum(limit[dofs], np.abs(mj.jnt_actfrcrange[j]).max())
+    warnings = [f"joint {name!r} has no actuator" for name, kind in kinds.items() if kind == "none"]
+    return limit[6:], kinds, warnings
+
+
+def _actuator_kind(mj: mujoco.MjModel, actuator: int) -> str:
+    """``motor`` (force = gain · ctrl), ``position`` (−kp q bias), ``velocity`` (−kv q̇ bias), ``general``."""
+    gain_type, bias_type = int(mj.actuator_gaintype[actuator]), int(mj.actuator_biastype[actuator])
+    bias = mj.actuator_biasprm[actuator]
+    if gain_type != _GAIN_FIXED or mj.actuator_dyntype[actuator] != 0:
+        return "general"
+    if bias_type == _BIAS_NONE:
+        return "motor"
+    if bias_type == _BIAS_AFFINE and bias[0] == 0 and bias[1] < 0:
+        return "position"
+    if bias_type == _BIAS_AFFINE and bias[0] == 0 and bias[1] == 0 and bias[2] < 0:
+        return "velocity"
+    return "general"
+
+
+# -- URDF through Pinocchio --------------------------------------------------------------
+
+
+def _read_urdf(text: bytes | str, read: FileReader | None, name: str) -> _Draft:
+    root = _parse_xml(text, "the URDF")
+    if root.tag != "robot":
+        raise DescriptionError(f"a URDF file's root element is <robot>, not <{root.tag}>")
+    try:
+        model = pin.buildModelFromXML(
+            text.decode() if isinstance(text, bytes) else text, pin.JointModelFreeFlyer()
+        )
+    except (RuntimeError, ValueError, IndexError) as exc:
+        message = str(exc).partition("message:")[2] or str(exc)
+        raise DescriptionError(
+            f"Pinocchio could not parse the URDF {name!r}: {' '.join(message.split())}"
+        ) from None
+    root_offset = model.jointPlacements[1].copy()
+    model.jointPlacements[1] = pin.SE3.Identity()
+    torque_limit = np.asarray(model.effortLimit[6:], dtype=float).copy()
+    torque_limit[torque_limit <= 0] = np.inf
+    model.effortLimit[6:] = torque_limit
+    links = {link.get("name", ""): link for link in root.iter("link")}
+    parents = {
+        j.find("child").get("link"): j.find("parent").get("link")
+        for j in root.iter("joint")
+        if j.find("child") is not None and j.find("parent") is not None
+    }
+    order = [f.name for f in model.frames if f.type == pin.BODY and f.name in links]
+    warnings: list[str] = []
+    bodies: list[Body] = []
+    for name in order:
+        points = [
+            _urdf_collision_points(c, read, warnings) for c in links[name].findall("collision")
+        ]
+        points = [p for p in points if p is not None]
+        parent_name = parents.get(name)
+        parent = next((i for i, b in enumerate(bodies) if b.name == parent_name), -1)
+        bodies.append(
+            Body(
+                name,
+                parent,
+                model.getFrameId(name, pin.BODY),
+                np.vstack(points) if points else np.zeros((0, 3)),
+            )
+        )
+    q = pin.neutral(model)
+    q[:3] = root_offset.translation
+    q[3:7] = pin.Quaternion(root_offset.rotation).coeffs()
+    kinds = {
+        model.names[i]: "effort" if np.isfinite(torque_limit[model.joints[i].idx_v - 6]) else "none"
+        for i in range(2, model.njoints)
+    }
+    warnings += [
+        f"joint {name!r} has no <limit effort>" for name, kind in kinds.items() if kind == "none"
+    ]
+    return _Draft(model, bodies, torque_limit, kinds, {}, q, {}, [], warnings)
+
+
+def _urdf_collision_points(
+    collision: ET.Element, read: FileReader | None, warnings: list[str]
+) -> np.ndarray | None:
+    """A URDF ``<collision>``'s points in its link frame (meshes read through MuJoCo)."""
+    origin = collision.find("origin")
+    xyz = np.array((origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split(), float)
+    rpy = np.array((origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split(), float)
+    rotation = pin.rpy.rpyToMatrix(*rpy)
+    geometry = collision.find("geometry")
+    shape = None if geometry is None or len(geometry) == 0 else geometry[0]
+    if shape is None:
+        return None
+
+    def numbers(key: str) -> np.ndarray:
+        return np.array(shape.get(key, "1 1 1").split(), float)
+
+    if shape.tag == "box":
+        local = _shape_points(_GEOM.mjGEOM_BOX, numbers("size") / 2, None)
+    elif shape.tag == "sphere":
+        local = _shape_points(_GEOM.mjGEOM_SPHERE, np.array([float(shape.get("radius", 0))]), None)
+    elif shape.tag == "cylinder":
+        radius, length = float(shape.get("radius", 0)), float(shape.get("length", 0))
+        local = _shape_points(_GEOM.mjGEOM_CYLINDER, np.array([radius, length / 2]), None)
+    elif shape.tag == "mesh":
+        local = _urdf_mesh_points(shape, read, warnings)
+    else:
+        return None
+    return None if local is None else local @ rotation.T + xyz
+
+
+def _urdf_mesh_path(filename: str) -> str:
+    """A URDF mesh's path relative to the URDF's directory (``package://pkg/x`` → ``x``)."""
+    return filename.split("://", 1)[1].split("/", 1)[-1] if "://" in filename else filename
+
+
+def _urdf_mesh_points(
+    mesh: ET.Element, read: FileReader | None, warnings: list[str]
+) -> np.ndarray | None:
+    """A URDF mesh's vertices (scaled, in its own frame), loaded by MuJoCo; ``None`` if unreadable."""
+    filename = mesh.get("filename", "")
+    path = _urdf_mesh_path(filename)
+    scale = mesh.get("scale", "1 1 1")
+    xml = (
+        f'<mujoco><asset><mesh name="m" file="m{PurePosixPath(path).suffix.lower()}" scale="{scale}"/>'
+        '</asset><worldbody><geom type="mesh" mesh="m"/></worldbody></mujoco>'
+    )
+    try:
+        data = _read(read, path, "<mesh filename>")
+        mj = mujoco.MjSpec.from_string(
+            xml, assets={f"m{PurePosixPath(path).suffix.lower()}": data}
+        ).compile()
+    except (DescriptionError, ValueError) as exc:
+        warnings.append(f"collision mesh {filename!r} skipped: {exc}")
+        return None
+    vertices = _mesh_vertices(mj, 0)
+    placement = _se3(mj.geom_pos[0], mj.geom_quat[0])
+    return vertices @ placement.rotation.T + placement.translation
+
+
+# -- contacts from geometry --------------------------------------------------------------
+
+
+def _subtree(bodies: Sequence[Body], top: int) -> list[int]:
+    inside = [top]
+    for index in range(top + 1, len(bodies)):
+        if bodies[index].parent in inside:
+            inside.append(index)
+    return inside
+
+
+def _to_world(placement: pin.SE3, points: np.ndarray) -> np.ndarray:
+    """``(k, 3)`` points in a frame → in the world, given the frame's placement."""
+    return points @ placement.rotation.T + placement.translation
+
+
+def _points_in_world(data: pin.Data, body: Body) -> np.ndarray:
+    return _to_world(data.oMf[body.frame_id], body.collision_points)
+
+
+def _sole(
+    model: pin.Model, data: pin.Data, bodies: Sequence[Body], top: int, frame_id: int
+) -> np.ndarray:
+    """Corners (in the frame) of the sole rectangle of the foot ``top`` and its descendants."""
+    world = np.vstack([_points_in_world(data, bodies[b]) for b in _subtree(bodies, top)])
+    if len(world) == 0:
+        raise DescriptionError(
+            f"body {bodies[top].name!r} has no collision geometry to find a sole on; "
+            "give the contact's points",
+            field="contacts",
+        )
+    low = world[world[:, 2] <= world[:, 2].min() + SOLE_HEIGHT_TOLERANCE_M]
+    frame = data.oMf[frame_id]
+    heading = frame.rotation[:, 0] * (1, 1, 0)
+    if np.linalg.norm(heading) < 1e-6:  # the frame's x points up or down: use its z
+        heading = frame.rotation[:, 2] * (1, 1, 0)
+    heading /= np.linalg.norm(heading)
+    lateral = np.array([-heading[1], heading[0], 0.0])
+    along, across = low @ heading, low @ lateral
+    corners_in_world = np.array(
+        [
+            a * heading + c * lateral + (0.0, 0.0, world[:, 2].min())
+            for a in (along.max(), along.min())
+            for c in (across.max(), across.min())
+        ]
+    )
+    corners = (corners_in_world - frame.translation) @ frame.rotation
+    # A line or point foot (spheres in a row, one sphere) has coincident corners: keep one each.
+    _, first = np.unique(np.round(corners, 6), axis=0, return_index=True)
+    return corners[np.sort(first)]
+
+
+def _named_contact(
+    spec: ContactSpec, model: pin.Model, data: pin.Data, bodies: Sequence[Body]
+) -> FoundContact:
+    if not model.existFrame(spec.frame):
+        raise FrameNotFoundError(
+            spec.frame, [f.name for f in model.frames if f.type in (pin.BODY, pin.OP_FRAME)]
+        )
+    frame_id = model.getFrameId(spec.frame)
+    if spec.points_in_frame is not None:
+        return FoundContact(
+            spec.name, spec.frame, np.array(spec.points_in_frame, float), spec.friction_coefficient
+        )
+    frame = model.frames[frame_id]
+    body_frame = frame_id if frame.type == pin.BODY else frame.parentFrame
+    top = next(i for i, b in enumerate(bodies) if b.frame_id == body_frame)
+    return FoundContact(
+        spec.name, spec.frame, _sole(model, data, bodies, top, frame_id), spec.friction_coefficient
+    )
+
+
+def _find_feet(model: pin.Model, data: pin.Data, bodies: Sequence[Body]) -> list[FoundContact]:
+    """The feet: lowest bodies (standing) without a lowest ancestor, named by their side."""
+    lowest = {
+        i: float(_points_in_world(data, b)[:, 2].min())
+        for i, b in enumerate(bodies)
+        if len(b.collision_points)
+    }
+    if not lowest:
+        raise DescriptionError(
+            "no body has collision geometry to find the feet on: give the contacts with their "
+            "points (`contacts`)",
+            field="contacts",
+        )
+    ground = min(lowest.values())
+    touching = {i for i, z in lowest.items() if z <= ground + FOOT_HEIGHT_TOLERANCE_M}
+    feet = []
+    for i in sorted(touching):
+        ancestor = bodies[i].parent
+        while ancestor >= 0 and ancestor not in touching:
+            ancestor = bodies[ancestor].parent
+        if ancestor < 0:
+            feet.append(i)
+    root = data.oMf[bodies[0].frame_id]
+    sides = [
+        float((root.rotation.T @ (data.oMf[bodies[i].frame_id].translation - root.translation))[1])
+        for i in feet
+    ]
+    if len(feet) == 2 and sides[0] * sides[1] < 0:
+        names = ["left_foot" if side > 0 else "right_foot" for side in sides]
+        order = [0, 1] if names[0] == "left_foot" else [1, 0]
+        feet, names = [feet[k] for k in order], [names[k] for k in order]
+    else:
+        names = [bodies[i].name for i in feet]
+    return [
+        FoundContact(name, bodies[i].name, _sole(model, data, bodies, i, bodies[i].frame_id))
+        for name, i in zip(names, feet, strict=True)
+    ]
