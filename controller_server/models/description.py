@@ -1,7 +1,7 @@
 """A robot as its vendor's file describes it: one reading shared by the server and the simulators.
 
 MJCF goes through MuJoCo's own compiler, which resolves what vendors write:
-``<include>``\\ d robot files under a ``scene.xml``, ``<default>`` classes,
+robot files ``<include>``-ed by a ``scene.xml``, ``<default>`` classes,
 both free-joint spellings, meshes, ``autolimits``, extra root bodies
 (cameras, mocap targets, props). The Pinocchio model is then built from the
 *compiled* MuJoCo model, body by body, so the server's dynamics are the
@@ -68,7 +68,7 @@ FOOT_HEIGHT_TOLERANCE_M = 0.02
 SOLE_HEIGHT_TOLERANCE_M = 0.005
 """A foot's collision points this close to its lowest point span its sole."""
 MAX_INCLUDE_DEPTH = 16
-"""Deepest chain of ``<include>``\\ s followed."""
+"""Deepest chain of includes followed."""
 
 FileReader = Callable[[str], bytes]
 """Reads a file named by a model: a path relative to the main file's directory (POSIX)."""
@@ -663,7 +663,7 @@ def _mesh_vertices(mj: mujoco.MjModel, geom: int) -> np.ndarray | None:
 
 
 def _shape_points(kind: int, size: np.ndarray, vertices: np.ndarray | None) -> np.ndarray | None:
-    """Points of a primitive in its own frame: vertices, axis extremes and rims (``None``: a plane)."""
+    """A primitive's points in its frame: vertices, axis extremes, rims (``None``: a plane)."""
     axes = np.vstack([np.eye(3), -np.eye(3)])
     rim = np.array(
         [(np.cos(a), np.sin(a), 0.0) for a in np.linspace(0, 2 * np.pi, 16, endpoint=False)]
@@ -720,7 +720,7 @@ def _mjcf_actuation(
 
 
 def _actuator_kind(mj: mujoco.MjModel, actuator: int) -> str:
-    """``motor`` (force = gain · ctrl), ``position`` (−kp q bias), ``velocity`` (−kv q̇ bias), ``general``."""
+    """``motor`` (gain · ctrl), ``position`` (−kp q bias), ``velocity`` (−kv q̇), ``general``."""
     gain_type, bias_type = int(mj.actuator_gaintype[actuator]), int(mj.actuator_biastype[actuator])
     bias = mj.actuator_biasprm[actuator]
     if gain_type != _GAIN_FIXED or mj.actuator_dyntype[actuator] != 0:
@@ -830,19 +830,19 @@ def _urdf_mesh_path(filename: str) -> str:
 def _urdf_mesh_points(
     mesh: ET.Element, read: FileReader | None, warnings: list[str]
 ) -> np.ndarray | None:
-    """A URDF mesh's vertices (scaled, in its own frame), loaded by MuJoCo; ``None`` if unreadable."""
+    """A URDF mesh's vertices (scaled, own frame), loaded by MuJoCo; ``None`` if unreadable."""
     filename = mesh.get("filename", "")
     path = _urdf_mesh_path(filename)
-    scale = mesh.get("scale", "1 1 1")
-    xml = (
-        f'<mujoco><asset><mesh name="m" file="m{PurePosixPath(path).suffix.lower()}" scale="{scale}"/>'
-        '</asset><worldbody><geom type="mesh" mesh="m"/></worldbody></mujoco>'
-    )
+    key = f"mesh{PurePosixPath(path).suffix.lower()}"
     try:
+        # Numbers only into the XML: the URDF's text never reaches MuJoCo's parser.
+        scale = " ".join(repr(float(x)) for x in mesh.get("scale", "1 1 1").split()[:3])
+        xml = (
+            f'<mujoco><asset><mesh name="m" file="{key}" scale="{scale}"/></asset>'
+            '<worldbody><geom type="mesh" mesh="m"/></worldbody></mujoco>'
+        )
         data = _read(read, path, "<mesh filename>")
-        mj = mujoco.MjSpec.from_string(
-            xml, assets={f"m{PurePosixPath(path).suffix.lower()}": data}
-        ).compile()
+        mj = mujoco.MjSpec.from_string(xml, assets={key: data}).compile()
     except (DescriptionError, ValueError) as exc:
         warnings.append(f"collision mesh {filename!r} skipped: {exc}")
         return None

@@ -326,7 +326,8 @@ def _server_reader(directory: Path) -> Callable[[str], bytes]:
             return MODEL_ASSET_FILES.read_bytes(str(directory / relative))[1]
         except ServerFault as exc:
             raise DescriptionError(
-                f"{relative!r} is not a readable file in the server's model directories ({exc.detail})"
+                f"{relative!r} is not a readable file in the server's model directories "
+                f"({exc.detail})"
             ) from None
 
     return read
