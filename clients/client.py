@@ -262,6 +262,8 @@ class ControllerClient:
         *,
         model_text: str | None = None,
         model_format: str = "mjcf",
+        model_assets: dict[str, bytes] | None = None,
+        keyframe: str | None = None,
         controller: str = "momentum",
         params: Mapping[str, Any] | None = None,
         contacts: list[ContactSpec] | None = None,
@@ -282,6 +284,8 @@ class ControllerClient:
             model=model,
             model_text=model_text,
             model_format=model_format,  # type: ignore[arg-type]
+            model_assets=model_assets,
+            keyframe=keyframe,
             controller=controller,
             params=dict(params or {}),
             contacts=contacts,

@@ -26,16 +26,22 @@ class RobotState:
 
     @classmethod
     def standing(cls, welcome: Welcome, joint_position: np.ndarray | None = None) -> RobotState:
-        """At rest, upright, at ``welcome``'s standing height, in the neutral pose.
+        """At rest in ``welcome``'s standing pose (the neutral pose from an older server).
 
-        ``joint_position`` (wire order) replaces the neutral pose if given.
+        ``joint_position`` (wire order) replaces the standing joints if given.
         """
         joints = list(welcome.joints)
+        if joint_position is None:
+            joint_position = (
+                neutral_joint_position(joints)
+                if welcome.standing_joint_position is None
+                else np.array(welcome.standing_joint_position, dtype=float)
+            )
         return cls(
-            neutral_joint_position(joints) if joint_position is None else joint_position,
+            joint_position,
             np.zeros(sum(joint.nv for joint in joints)),
             np.array(welcome.standing_position_base_in_world),
-            np.array([0.0, 0.0, 0.0, 1.0]),
+            np.array(welcome.standing_orientation_base_in_world_xyzw),
             np.zeros(3),
             np.zeros(3),
         )

@@ -19,8 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import pinocchio as pin
-
 from clients.bridge.base_state import (
     BaseStateSource,
     FixedBase,
@@ -44,7 +42,7 @@ from clients.bridge.joint_map import JointMap
 from clients.bridge.loop import Bridge, BridgeReport, Pacer
 from clients.bridge.plant import RealTimePacer
 from clients.client import ControllerClient, CurveKeys
-from clients.sim.model_file import hello_model, resolve_model_path
+from clients.sim.model_file import describe_model, hello_model
 
 if TYPE_CHECKING:
     from clients.bridge.emulation import Emulation
@@ -196,7 +194,7 @@ def open_bridge(
                 for joint, actuator in config.joints.items()
             },
         )
-        model = pin.buildModelFromMJCF(str(resolve_model_path(settings.model)))
+        model = describe_model(settings.model).model
         pacer: Pacer = RealTimePacer(period_s)
         base: BaseStateSource = FixedBase(welcome) if imu_source is None else imu_source
         overrides: dict[str, dict[str, Any]] = {}

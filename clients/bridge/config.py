@@ -37,7 +37,7 @@ from pydantic import (
 )
 
 from clients.sim.imu import ImuSpec
-from clients.sim.model_file import body_names, resolve_model_path
+from clients.sim.model_file import body_names, describe_model, resolve_model_path
 from clients.sim.scenario import PushSpec, explain
 from protocol.errors import PoiseError
 from protocol.messages import Welcome
@@ -391,7 +391,7 @@ def imu_mount_on_root_body(config: BridgeConfig) -> tuple[str, pin.SE3]:
     """
     settings = config.imu_settings
     path = resolve_model_path(config.bridge.model)
-    model = pin.buildModelFromMJCF(str(path))
+    model = describe_model(config.bridge.model).model
     offset = pin.SE3(
         pin.Quaternion(np.array(settings.orientation_in_frame_xyzw)).toRotationMatrix(),
         np.array(settings.position_in_frame, dtype=float),
@@ -414,6 +414,6 @@ def imu_mount_on_root_body(config: BridgeConfig) -> tuple[str, pin.SE3]:
                 f"{model.names[frame.parentJoint]!r} between them): mount the IMU on the root body"
             )
         mount_in_joint = frame.placement * offset
-    root = body_names(path)[0]
+    root = body_names(config.bridge.model)[0]
     body = next(f for f in model.frames if f.type == pin.FrameType.BODY and f.name == root)
     return root, body.placement.inverse() * mount_in_joint

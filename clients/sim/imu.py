@@ -61,8 +61,8 @@ import numpy as np
 import pinocchio as pin
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from clients.sim.model_file import body_names, resolve_model_path
-from clients.sim.reference import BodyNotFound, mjcf_gravity_in_world
+from clients.sim.model_file import body_names, describe_model, resolve_model_path
+from clients.sim.reference import BodyNotFound
 from clients.state import RobotState
 from protocol.messages import ImuSample
 
@@ -294,7 +294,7 @@ class ImuReading:
         )
 
 
-def add_imu_frame(model: pin.Model, spec: ImuSpec, path: Path) -> int:
+def add_imu_frame(model: pin.Model, spec: ImuSpec, path: str | Path) -> int:
     """Add the IMU's operational frame (:data:`IMU_FRAME_NAME`) to ``model``.
 
     Args:
@@ -309,7 +309,7 @@ def add_imu_frame(model: pin.Model, spec: ImuSpec, path: Path) -> int:
     Raises:
         BodyNotFound: ``spec.body`` is not a body of the model.
     """
-    bodies = body_names(path)
+    bodies = body_names(str(path))
     name = spec.body or (bodies[0] if bodies else "")
     frames = [
         index
@@ -361,13 +361,13 @@ class SimulatedImu:
     ):
         self.spec = spec
         self.path = resolve_model_path(str(model_path))
-        self._model = pin.buildModelFromMJCF(str(self.path))
-        self.frame_id = add_imu_frame(self._model, spec, self.path)
+        self._model = pin.Model(describe_model(str(model_path)).model)
+        self.frame_id = add_imu_frame(self._model, spec, str(model_path))
         self._data = self._model.createData()
         frame = self._model.frames[self.frame_id]
         self.body_name = self._model.frames[frame.parentFrame].name
         self.gravity_in_world_m_per_s2 = (
-            mjcf_gravity_in_world(self.path)
+            np.array(self._model.gravity.linear)
             if gravity_in_world_m_per_s2 is None
             else np.asarray(gravity_in_world_m_per_s2, dtype=float).reshape(3)
         )

@@ -9,7 +9,7 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from clients.layout import joint_slices
-from clients.sim.model_file import resolve_model_path
+from clients.sim.model_file import describe_model
 from clients.sim.runner import RunRecord
 
 __all__ = [
@@ -71,7 +71,7 @@ def _foot_slip_and_rotation(record: RunRecord) -> tuple[float, float]:
     the foot became a support, from the simulated states (Pinocchio forward kinematics
     of the scenario's MJCF): a planted foot neither slides nor rocks.
     """
-    model = pin.buildModelFromMJCF(str(resolve_model_path(record.scenario.model)))
+    model = describe_model(record.scenario.model).model
     data = model.createData()
     frames = [model.getFrameId(contact.frame) for contact in record.welcome.contacts]
     anchors: list[pin.SE3 | None] = [None] * len(frames)

@@ -1,28 +1,41 @@
-"""Model files for simulator backends: where built-ins live, where the feet touch.
+"""Model files for the clients: where built-ins live, and what a file describes.
 
-The simulator reads the same MJCF the server loads. It finds the built-in
-files by the ``controller_server`` package's location without importing it
-(a client talks to the server only through the protocol), and takes the
-foot contact points from the ``*_sole`` box sites exactly as the server does
-by default: the four corners of each site's x–y rectangle.
+The simulators and the bridge read a robot file exactly as the server does:
+through :mod:`controller_server.models.description`, the one reading of MJCF
+and URDF shared by server and clients (the only server module a client
+imports: it knows no session and no wire). So the simulated robot, its
+contacts and its standing pose are the ones the server controls. Built-in
+files are found by the ``controller_server`` package's location.
 """
 
 from __future__ import annotations
 
 import importlib.util
-import xml.etree.ElementTree as ET
+import json
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 from clients.sim.backend import ContactPoint
+from controller_server.models.description import (
+    DescriptionError,
+    FileReader,
+    RobotDescription,
+    describe,
+    gather_files,
+)
+from protocol.messages import ContactSpec
 
 __all__ = [
+    "DescriptionError",
     "body_names",
     "builtin_model_names",
     "builtin_model_path",
+    "contact_points",
+    "describe_model",
     "hello_model",
+    "model_format",
     "resolve_model_path",
-    "sole_contact_points",
 ]
 
 
@@ -66,39 +79,79 @@ def resolve_model_path(model: str) -> Path:
     return path
 
 
+def model_format(path: Path) -> str:
+    """``urdf`` for a ``.urdf`` file, else ``mjcf``."""
+    return "urdf" if path.suffix.lower() == ".urdf" else "mjcf"
+
+
+def _local_reader(path: Path) -> FileReader:
+    """Reads the files a model names, relative to its directory."""
+    return lambda relative: (path.parent / relative).read_bytes()
+
+
+def describe_model(
+    model: str, *, contacts: list[ContactSpec] | None = None, keyframe: str | None = None
+) -> RobotDescription:
+    """What Poise reads from a built-in or a model file (cached per file, contacts and keyframe).
+
+    Raises:
+        FileNotFoundError: No such file or built-in.
+        DescriptionError: The file cannot be used as written (one line saying what to do).
+    """
+    path = resolve_model_path(model).resolve()
+    contacts_json = None if contacts is None else json.dumps([c.model_dump() for c in contacts])
+    return _describe(path, path.stat().st_mtime_ns, contacts_json, keyframe)
+
+
+@lru_cache(maxsize=16)
+def _describe(
+    path: Path, mtime_ns: int, contacts_json: str | None, keyframe: str | None
+) -> RobotDescription:
+    contacts = (
+        None
+        if contacts_json is None
+        else [ContactSpec.model_validate(c) for c in json.loads(contacts_json)]
+    )
+    return describe(
+        path.read_bytes(),
+        model_format(path),
+        read=_local_reader(path),
+        name=path.stem,
+        contacts=contacts,
+        keyframe=keyframe,
+    )
+
+
 def hello_model(model: str) -> dict[str, Any]:
-    """The ``hello`` fields naming ``model``: a built-in by name, a file by its text.
+    """The ``hello`` fields naming ``model``: a built-in by name, a file by its text and files.
 
     A server reads files only from its own model directories, and may run on
-    another machine; the simulator has the file, so it sends what it simulates.
+    another machine; the simulator has the files, so it sends what it
+    simulates: the main file's text and every file it names (includes, meshes).
+
+    Raises:
+        DescriptionError: The model names a file that cannot be read.
     """
     path = Path(model)
     if not (path.suffix and path.is_file()):
         return {"model": model}
-    return {
-        "model_text": path.read_text(),
-        "model_format": "urdf" if path.suffix == ".urdf" else "mjcf",
-    }
+    text = path.read_bytes()
+    fields: dict[str, Any] = {"model_text": text.decode(), "model_format": model_format(path)}
+    assets = gather_files(text, model_format(path), _local_reader(path))
+    if assets:
+        fields["model_assets"] = assets
+    return fields
 
 
-def body_names(path: Path) -> list[str]:
-    """Names of the MJCF bodies (what a push may name), in document order."""
-    worldbody = ET.parse(path).getroot().find("worldbody")
-    if worldbody is None:
-        return []
-    return [name for body in worldbody.iter("body") if (name := body.get("name"))]
+def body_names(model: str) -> list[str]:
+    """Names of the robot's bodies (what a push may name), root first."""
+    return [body.name for body in describe_model(model).bodies]
 
 
-def sole_contact_points(path: Path) -> list[ContactPoint]:
-    """Corners of every ``*_sole`` box site, contacts named ``<side>_foot`` (server order)."""
-    points = []
-    for site in ET.parse(path).getroot().iter("site"):
-        name = site.get("name", "")
-        if not name.endswith("_sole") or site.get("type") != "box":
-            continue
-        half_x, half_y = (float(s) for s in site.get("size", "0 0 0").split()[:2])
-        contact = name.removesuffix("_sole") + "_foot"
-        for sx in (1, -1):
-            for sy in (1, -1):
-                points.append(ContactPoint(contact, name, (sx * half_x, sy * half_y, 0.0)))
-    return points
+def contact_points(description: RobotDescription) -> list[ContactPoint]:
+    """Every contact point of the description, in contact order, in its contact's frame."""
+    return [
+        ContactPoint(contact.name, contact.frame, tuple(float(c) for c in point))
+        for contact in description.contacts
+        for point in contact.points_in_frame
+    ]

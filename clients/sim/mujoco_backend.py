@@ -56,24 +56,30 @@ they describe the reset state under zero torques.
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
+import re
 from collections.abc import Sequence
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import mujoco
 import numpy as np
 
 from clients.sim.backend import Push, StepReport
 from clients.sim.errors import SimulationDiverged, UnsupportedModel
-from clients.sim.model_file import resolve_model_path, sole_contact_points
+from clients.sim.model_file import (
+    DescriptionError,
+    describe_model,
+    model_format,
+    resolve_model_path,
+)
 from clients.state import RobotState
+from controller_server.models.description import compile_mjcf, gather_files
+from protocol.messages import ContactSpec
 
 __all__ = [
     "GRAVITY_M_S2",
     "MujocoBackend",
     "SimulationDiverged",
     "UnsupportedModel",
-    "mjcf_joint_names",
 ]
 
 GRAVITY_M_S2 = 9.81
@@ -126,28 +132,40 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-def _sole_sites(path: Path) -> dict[str, str]:
-    """Contact name → sole site, in the server's order (``sole_contact_points``)."""
-    return {point.contact: point.frame for point in sole_contact_points(path)}
+def _mujoco_spec(path: Path) -> mujoco.MjSpec:
+    """The file as MuJoCo reads it: MJCF with its includes and assets, or URDF.
 
-
-def mjcf_joint_names(path: Path) -> list[str]:
-    """Names of the non-free joints in MJCF document order (= Pinocchio's order).
-
-    Args:
-        path: MJCF file.
-
-    Returns:
-        Joint names in wire order.
+    URDF is imported by MuJoCo's own importer, with its static links kept
+    (``fusestatic="false"``: the root link would otherwise be fused into the
+    world) and meshes found by file name, as MuJoCo's importer looks them up.
     """
-    worldbody = ET.parse(path).getroot().find("worldbody")
-    if worldbody is None:
-        return []
-    return [
-        joint.get("name", "")
-        for joint in worldbody.iter("joint")
-        if joint.get("type", "hinge") != "free"
-    ]
+    text = path.read_bytes()
+    read = lambda relative: (path.parent / relative).read_bytes()  # noqa: E731
+    if model_format(path) == "mjcf":
+        return compile_mjcf(text, read)[0]
+    assets = {
+        PurePosixPath(name).name: data for name, data in gather_files(text, "urdf", read).items()
+    }
+    urdf = re.sub(
+        rb"(<robot\b[^>]*>)",
+        rb'\1<mujoco><compiler fusestatic="false" discardvisual="true"/></mujoco>',
+        text,
+        count=1,
+    )
+    try:
+        return mujoco.MjSpec.from_string(urdf.decode(), assets=assets)
+    except ValueError as exc:
+        detail = " ".join(str(exc).split())
+        raise DescriptionError(f"MuJoCo could not import the URDF: {detail}") from None
+
+
+def _subtree_bodies(model: mujoco.MjModel, top: int) -> list[int]:
+    """``top`` and every body below it (MuJoCo numbers parents before children)."""
+    inside = [top]
+    for body in range(top + 1, model.nbody):
+        if int(model.body_parentid[body]) in inside:
+            inside.append(body)
+    return inside
 
 
 class MujocoBackend:
@@ -176,6 +194,8 @@ class MujocoBackend:
         timestep_s: float = 0.001,
         ground_height_m: float = 0.0,
         joint_names: Sequence[str] | None = None,
+        contacts: list[ContactSpec] | None = None,
+        keyframe: str | None = None,
     ):
         """Load the model and build the wire ↔ MuJoCo maps once.
 
@@ -185,12 +205,16 @@ class MujocoBackend:
             timestep_s: Integration step (s).
             ground_height_m: Height of the floor plane (m).
             joint_names: Wire joint order (e.g. from ``welcome.joints``);
-                default: MJCF document order, which is the server's.
+                default: the server's (Pinocchio's) order.
+            contacts: The feet, as in ``hello.contacts`` (default: found as the server finds them).
+            keyframe: MJCF keyframe of the standing pose (the contacts are found in it).
 
         Raises:
             ValueError: A non-positive or non-finite coefficient or step.
-            UnsupportedModel: No free root joint, no floor, a DoF without a
-                motor, or a joint type the wire cannot carry.
+            UnsupportedModel: The file cannot be used as written, a floor that
+                is not horizontal, a DoF without an actuator, an actuator
+                that is neither a motor nor a position or velocity servo, or
+                a joint type the wire cannot carry.
         """
         if not (math.isfinite(friction_coefficient) and friction_coefficient > 0):
             raise ValueError(f"{friction_coefficient=} must be a positive number")
@@ -205,19 +229,24 @@ class MujocoBackend:
         self.time_s = 0.0
         self._step_count = 0
 
-        contact_frames = _sole_sites(self.model_path)
-        spec = mujoco.MjSpec.from_file(str(self.model_path))
-        self._configure(spec, contact_frames)
+        try:
+            self.description = describe_model(model, contacts=contacts, keyframe=keyframe)
+            spec = _mujoco_spec(self.model_path)
+        except DescriptionError as exc:
+            raise self._fail(str(exc)) from None
+        self.conversions: list[str] = []
+        """What was changed so MuJoCo simulates what the server controls (for the run's log)."""
+        self._configure(spec)
         # Edits go through MjSpec so that compiled, derived fields (static
         # geom poses, same-frame flags) follow them.
         self._model = spec.compile()
         self._data = mujoco.MjData(self._model)
         self._map_base()
         self._map_joints(
-            list(joint_names) if joint_names is not None else mjcf_joint_names(self.model_path)
+            list(joint_names) if joint_names is not None else self.description.joint_names
         )
         self._map_actuators()
-        self._map_contacts(contact_frames)
+        self._map_contacts()
         self.total_mass_kg = float(self._model.body_mass[1:].sum())
         self._body_ids: dict[str, int] = {}
         self._pushed_bodies: list[int] = []
@@ -234,12 +263,9 @@ class MujocoBackend:
 
     def _map_base(self) -> None:
         model = self._model
+        root = model.body(self.description.bodies[0].name).id
         free = [j for j in range(model.njnt) if model.jnt_type[j] == _FREE]
-        if len(free) != 1 or model.body_parentid[model.jnt_bodyid[free[0]]] != _WORLD_BODY:
-            raise self._fail(
-                "expected exactly one free joint, on a child of the world body "
-                f"(found {len(free)}); give the root body a <freejoint/>"
-            )
+        free = [j for j in free if model.jnt_bodyid[j] == root]
         self._base_joint = free[0]
         self._base_qpos = int(model.jnt_qposadr[free[0]])
         self._base_dof = int(model.jnt_dofadr[free[0]])
@@ -248,7 +274,9 @@ class MujocoBackend:
         model = self._model
         qpos_index: list[int] = []
         dof_index: list[int] = []
-        mujoco_names = [model.joint(j).name for j in range(model.njnt) if j != self._base_joint]
+        mujoco_names = [
+            model.joint(j).name for j in range(model.njnt) if model.jnt_type[j] != _FREE
+        ]
         if sorted(names) != sorted(mujoco_names):
             raise self._fail(
                 f"wire joints {names} are not the model's non-free joints {mujoco_names}"
@@ -306,46 +334,114 @@ class MujocoBackend:
         )
         self._actuator_gear = np.array([dof_to_actuator[int(d)][1] for d in self._dof_index])
 
-    def _map_contacts(self, contact_frames: dict[str, str]) -> None:
+    def _map_contacts(self) -> None:
+        """Per contact: its reference point (a site or body origin) and the geoms of its foot.
+
+        A foot is the body of the contact's frame and every body below it.
+        """
         model = self._model
-        self.contact_names = tuple(contact_frames)
-        self.contact_frames = tuple(contact_frames.values())
-        frames = self.contact_frames
-        self._sole_sites = np.array([model.site(f).id for f in frames], dtype=np.intp)
-        foot_bodies = [int(model.site_bodyid[s]) for s in self._sole_sites]
+        contacts = self.description.contacts
+        self.contact_names = tuple(c.name for c in contacts)
+        self.contact_frames = tuple(c.frame for c in contacts)
+        sites = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f) for f in self.contact_frames]
+        bodies = [
+            int(model.site_bodyid[site]) if site >= 0 else model.body(frame).id
+            for site, frame in zip(sites, self.contact_frames, strict=True)
+        ]
+        self._reference_sites = [(index, site) for index, site in enumerate(sites) if site >= 0]
+        self._reference_bodies = [
+            (index, body)
+            for index, (site, body) in enumerate(zip(sites, bodies, strict=True))
+            if site < 0
+        ]
         # Per geom: index of the contact whose foot it belongs to, −1 otherwise.
         self._geom_contact = np.full(model.ngeom, -1, dtype=np.intp)
-        for contact, body in enumerate(foot_bodies):
-            self._geom_contact[model.geom_bodyid == body] = contact
+        for contact, body in enumerate(bodies):
+            self._geom_contact[np.isin(model.geom_bodyid, _subtree_bodies(model, body))] = contact
         self._geom_is_ground = model.geom_bodyid == _WORLD_BODY
         self._ground_list: list[bool] = self._geom_is_ground.tolist()
         self._contact_of_geom: list[int] = self._geom_contact.tolist()
 
-    def _configure(self, spec: mujoco.MjSpec, contact_frames: dict[str, str]) -> None:
-        """Options, floor height, friction and priorities, before compiling."""
+    def _reference_points(self) -> np.ndarray:
+        """``(contacts, 3)`` world position of each contact's frame origin."""
+        data = self._data
+        points = np.empty((len(self.contact_names), 3))
+        for index, site in self._reference_sites:
+            points[index] = data.site_xpos[site]
+        for index, body in self._reference_bodies:
+            points[index] = data.xpos[body]
+        return points
+
+    def _configure(self, spec: mujoco.MjSpec) -> None:
+        """Options, floor, free root, actuators, friction and priorities, before compiling."""
         options = spec.option
         options.timestep = self.timestep_s
         options.gravity = [0.0, 0.0, -GRAVITY_M_S2]
         options.integrator = mujoco.mjtIntegrator.mjINT_EULER
         options.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-        ground = list(spec.worldbody.geoms)
-        planes = [g for g in ground if g.type == mujoco.mjtGeom.mjGEOM_PLANE]
+        planes = [g for g in spec.worldbody.geoms if g.type == mujoco.mjtGeom.mjGEOM_PLANE]
         if not planes:
-            raise self._fail("no floor: add a plane geom to the world body")
+            planes = [spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])]
+            self.conversions.append("added a floor (the model has no plane)")
         for plane in planes:
             if not np.allclose(plane.quat, (1.0, 0.0, 0.0, 0.0)):
                 raise self._fail(f"floor {plane.name!r} is not horizontal")
             plane.pos[2] = self.ground_height_m
+        root = spec.body(self.description.bodies[0].name)
+        if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in root.joints):
+            root.add_freejoint()
+            self.conversions.append(f"gave the root body {root.name!r} a free joint")
+        self._convert_actuators(spec)
         top_priority = max(geom.priority for geom in spec.geoms)
-        for geom in ground:
+        for geom in spec.worldbody.geoms:
             geom.friction[0] = self.friction_coefficient
             geom.priority = top_priority + 1
-        for frame in contact_frames.values():
-            site = spec.site(frame)
-            if site is None:
-                raise self._fail(f"no site {frame!r}")
-            for geom in site.parent.geoms:
+        for contact in self.description.contacts:
+            site = spec.site(contact.frame)
+            body = site.parent if site is not None else spec.body(contact.frame)
+            for geom in body.find_all(mujoco.mjtObj.mjOBJ_GEOM) + list(body.geoms):
                 geom.friction[0] = self.friction_coefficient
+
+    def _convert_actuators(self, spec: mujoco.MjSpec) -> None:
+        """Position and velocity servos become torque motors, force limits kept.
+
+        The server commands torques; a servo would take them as set-points. A
+        URDF's joints (no actuators in MuJoCo's import) get motors at their
+        ``<limit effort>``. Anything else on a robot joint is refused.
+        """
+        joints = set(self.description.joint_names)
+        converted = []
+        for actuator in spec.actuators:
+            if actuator.target not in joints:
+                continue
+            kind = self.description.actuator_kind.get(actuator.target, "general")
+            if kind == "motor":
+                continue
+            if kind not in ("position", "velocity"):
+                raise self._fail(
+                    f"actuator {actuator.name!r} on joint {actuator.target!r} is a general "
+                    "actuator; Poise sends torques: make it a <motor> (with its forcerange)"
+                )
+            actuator.set_to_motor()
+            actuator.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
+            actuator.inheritrange = 0.0
+            converted.append(actuator.name or actuator.target)
+        if converted:
+            self.conversions.append(
+                f"made {len(converted)} position/velocity servos torque motors, force "
+                f"limits kept: {', '.join(converted)}"
+            )
+        if self.description.format == "urdf":
+            limits = dict(
+                zip(self.description.joint_names, self.description.torque_limit, strict=True)
+            )
+            for name, limit in limits.items():
+                motor = spec.add_actuator(target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+                motor.name = name
+                if np.isfinite(limit):
+                    motor.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+                    motor.forcerange = [-limit, limit]
+            self.conversions.append(f"added {len(limits)} motors at the URDF's effort limits")
 
     # -- PhysicsBackend -----------------------------------------------------------------
 
@@ -534,10 +630,11 @@ class MujocoBackend:
         return list(self._flags)
 
     def contact_wrenches_in_world(self) -> np.ndarray:
-        """``(contacts, 6)``: ground force on each foot and its torque about the sole site.
+        """``(contacts, 6)``: ground force on each foot and its torque about the contact frame.
 
-        Forces are in world axes (N), torques about the ``*_sole`` site origin
-        in world axes (N·m), for the contacts that acted during the last step.
+        Forces are in world axes (N), torques about the origin of the contact's
+        frame (its sole site, or its body) in world axes (N·m), for the
+        contacts that acted during the last step.
         """
         model, data = self._model, self._data
         wrenches = np.zeros((len(self.contact_names), 6))
@@ -559,6 +656,6 @@ class MujocoBackend:
         frames = contacts.frame[list(index)].reshape(-1, 3, 3) * np.array(sign)[:, None, None]
         force = np.matmul(in_contact_frame[:, None, :3], frames)[:, 0]  # frameᵀ f
         torque = np.matmul(in_contact_frame[:, None, 3:], frames)[:, 0]
-        lever = contacts.pos[list(index)] - data.site_xpos[self._sole_sites[list(feet)]]
+        lever = contacts.pos[list(index)] - self._reference_points()[list(feet)]
         np.add.at(wrenches, list(feet), np.hstack([force, torque + _cross(lever, force)]))
         return wrenches

@@ -46,19 +46,23 @@ than the foot bodies below the ground; those corners get no forces.
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from scipy.spatial.transform import Rotation
 
 from clients.sim.backend import ContactPoint, Push, StepReport
 from clients.sim.errors import SimulationDiverged, UnsupportedModel
-from clients.sim.model_file import resolve_model_path, sole_contact_points
+from clients.sim.model_file import (
+    DescriptionError,
+    contact_points,
+    describe_model,
+    resolve_model_path,
+)
 from clients.state import RobotState
+from controller_server.models.description import RobotDescription, subtree
 from protocol.errors import PoiseError
+from protocol.messages import ContactSpec
 
 __all__ = [
     "DEFAULT_CONTACT_DAMPING_NS_PER_M",
@@ -67,8 +71,6 @@ __all__ = [
     "ReferenceBackend",
     "SimulationDiverged",
     "UnsupportedModel",
-    "box_corners_in_bodies",
-    "mjcf_gravity_in_world",
 ]
 
 DEFAULT_CONTACT_STIFFNESS_N_PER_M = 2.0e5
@@ -89,86 +91,6 @@ class BodyNotFound(PoiseError, KeyError):
         self.name = name
         self.available = available
         super().__init__(f"no body {name!r} in the model; bodies: {', '.join(available)}")
-
-
-def _floats(text: str | None, count: int, default: tuple[float, ...]) -> np.ndarray:
-    if text is None:
-        return np.array(default, dtype=float)
-    values = np.array([float(s) for s in text.split()], dtype=float)
-    if values.size < count:
-        raise UnsupportedModel(f"expected {count} numbers, got {text!r}")
-    return values[:count]
-
-
-def _mjcf_rotation(element: ET.Element, degrees: bool, euler_sequence: str) -> np.ndarray:
-    """Rotation matrix of an MJCF element's orientation (quat, euler, axisangle, xyaxes, zaxis)."""
-    if (quat := element.get("quat")) is not None:
-        w, x, y, z = _floats(quat, 4, ())
-        return Rotation.from_quat([x, y, z, w]).as_matrix()
-    if (euler := element.get("euler")) is not None:
-        # MJCF: lower case = intrinsic (rotating axes); SciPy: upper case = intrinsic.
-        return Rotation.from_euler(
-            euler_sequence.swapcase(), _floats(euler, 3, ()), degrees=degrees
-        ).as_matrix()
-    if (axisangle := element.get("axisangle")) is not None:
-        values = _floats(axisangle, 4, ())
-        angle = np.radians(values[3]) if degrees else values[3]
-        return Rotation.from_rotvec(angle * values[:3] / np.linalg.norm(values[:3])).as_matrix()
-    if (xyaxes := element.get("xyaxes")) is not None:
-        values = _floats(xyaxes, 6, ())
-        x_axis = values[:3] / np.linalg.norm(values[:3])
-        y_axis = values[3:] - (values[3:] @ x_axis) * x_axis
-        y_axis /= np.linalg.norm(y_axis)
-        return np.column_stack([x_axis, y_axis, np.cross(x_axis, y_axis)])
-    if (zaxis := element.get("zaxis")) is not None:
-        z_axis = _floats(zaxis, 3, ())
-        z_axis /= np.linalg.norm(z_axis)
-        axis = np.cross([0.0, 0.0, 1.0], z_axis)
-        angle = np.arctan2(np.linalg.norm(axis), z_axis[2])
-        if np.linalg.norm(axis) < 1e-12:
-            return np.eye(3) if z_axis[2] > 0 else np.diag([1.0, -1.0, -1.0])
-        return Rotation.from_rotvec(angle * axis / np.linalg.norm(axis)).as_matrix()
-    return np.eye(3)
-
-
-def box_corners_in_bodies(path: Path) -> dict[str, np.ndarray]:
-    """The eight corners of every box geom, per MJCF body, in that body's frame.
-
-    Geoms of other types (and of the world body) are skipped: the built-in
-    models are boxes only. ``<default>`` classes are not expanded.
-
-    Args:
-        path: MJCF file.
-
-    Returns:
-        Body name → ``(8 · boxes, 3)`` corner positions (m).
-    """
-    root = ET.parse(path).getroot()
-    compiler = root.find("compiler")
-    degrees = compiler is None or compiler.get("angle", "degree") != "radian"
-    euler_sequence = "xyz" if compiler is None else compiler.get("eulerseq", "xyz")
-    signs = np.array([[sx, sy, sz] for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)], float)
-    corners: dict[str, np.ndarray] = {}
-    for body in root.iter("body"):
-        name = body.get("name", "")
-        for geom in body.findall("geom"):
-            if geom.get("type") != "box":
-                continue
-            if geom.get("fromto") is not None:
-                raise UnsupportedModel(f"box geom {geom.get('name')!r} uses fromto")
-            half_extents = _floats(geom.get("size"), 3, ())
-            rotation = _mjcf_rotation(geom, degrees, euler_sequence)
-            position = _floats(geom.get("pos"), 3, (0.0, 0.0, 0.0))
-            box = (signs * half_extents) @ rotation.T + position
-            corners[name] = np.vstack([corners[name], box]) if name in corners else box
-    return corners
-
-
-def mjcf_gravity_in_world(path: Path) -> np.ndarray:
-    """Gravity from the MJCF ``<option gravity>`` (MuJoCo's default ``0 0 −9.81``)."""
-    option = ET.parse(path).getroot().find("option")
-    text = None if option is None else option.get("gravity")
-    return _floats(text, 3, (0.0, 0.0, -9.81))
 
 
 def _skew(vector: np.ndarray) -> np.ndarray:
@@ -226,10 +148,10 @@ class ReferenceBackend:
     """Pinocchio ABA + penalty contact + semi-implicit Euler (Macchietto 2008, ch. 4.3).
 
     Implements :class:`clients.sim.backend.PhysicsBackend`. Starts standing in
-    the neutral pose at ``qpos0``, at rest.
+    the standing pose (the keyframe's, or the file's), at rest.
 
     Args:
-        model: Built-in model name or MJCF path.
+        model: Built-in model name, or an MJCF or URDF path.
         friction_coefficient: Coulomb μ between soles and ground.
         timestep_s: Integration step (s).
         ground_height_m: Height of the flat ground (m).
@@ -238,11 +160,12 @@ class ReferenceBackend:
         tangential_stiffness_N_per_m: Stick spring ``k_t`` per point (default ``k``).
         tangential_damping_Ns_per_m: Stick damper ``c_t`` per point (default ``c``).
         gravity_in_world_m_per_s2: Overrides the MJCF ``<option gravity>``.
+        contacts: The feet, as in ``hello.contacts`` (default: found as the server finds them).
+        keyframe: MJCF keyframe of the standing pose.
 
     Raises:
         ValueError: A parameter is out of range (its value is in the message).
-        UnsupportedModel: The MJCF has no free-floating root or uses
-            unsupported geometry.
+        UnsupportedModel: The model cannot be used as written (the message says why).
     """
 
     name = "reference"
@@ -259,6 +182,8 @@ class ReferenceBackend:
         tangential_stiffness_N_per_m: float | None = None,
         tangential_damping_Ns_per_m: float | None = None,
         gravity_in_world_m_per_s2: tuple[float, float, float] | None = None,
+        contacts: list[ContactSpec] | None = None,
+        keyframe: str | None = None,
     ):
         if tangential_stiffness_N_per_m is None:
             tangential_stiffness_N_per_m = contact_stiffness_N_per_m
@@ -289,17 +214,17 @@ class ReferenceBackend:
         self.time_s = 0.0
         self._steps = 0  # time_s = steps · Δt, without summing rounding errors
 
-        self._model = pin.buildModelFromMJCF(str(self.path))
-        if self._model.njoints < 2 or self._model.joints[1].shortname() != "JointModelFreeFlyer":
-            raise UnsupportedModel(f"{self.path}: the root body needs a freejoint")
-        gravity = (
-            mjcf_gravity_in_world(self.path)
-            if gravity_in_world_m_per_s2 is None
-            else np.asarray(gravity_in_world_m_per_s2, dtype=float).reshape(3)
-        )
-        self._model.gravity = pin.Motion(gravity, np.zeros(3))
+        try:
+            description = describe_model(model, contacts=contacts, keyframe=keyframe)
+        except DescriptionError as exc:
+            raise UnsupportedModel(f"{self.path}: {exc}") from None
+        self.description = description
+        self._model = pin.Model(description.model)
+        if gravity_in_world_m_per_s2 is not None:
+            gravity = np.asarray(gravity_in_world_m_per_s2, dtype=float).reshape(3)
+            self._model.gravity = pin.Motion(gravity, np.zeros(3))
         self._data = self._model.createData()
-        self._qpos0 = self._model.referenceConfigurations["qpos0"].copy()
+        self._qpos0 = np.array(description.standing_configuration)
         self._q = self._qpos0.copy()
         self._v = np.zeros(self._model.nv)
         self._tau = np.zeros(self._model.nv)
@@ -313,8 +238,8 @@ class ReferenceBackend:
             for frame in self._model.frames
             if frame.type == pin.FrameType.BODY
         }
-        self._setup_contacts(sole_contact_points(self.path))
-        self._setup_non_foot_geoms()
+        self._setup_contacts(contact_points(description))
+        self._setup_non_foot_geoms(description)
         self._update_kinematics()
         self._report_explicit_forces()
         self._contact_flags = (self._contact_sum @ self._touching > 0.0).tolist()
@@ -324,12 +249,7 @@ class ReferenceBackend:
     def _setup_contacts(self, points: list[ContactPoint]) -> None:
         self.contact_points = points
         self.contact_names: list[str] = list(dict.fromkeys(p.contact for p in points))
-        site_bodies = {
-            site.get("name"): body.get("name")
-            for body in ET.parse(self.path).getroot().iter("body")
-            for site in body.findall("site")
-        }
-        self._foot_bodies = set()
+        self._foot_frames = set()
         self._blocks: list[_ContactBlock] = []
         start = 0
         for contact in self.contact_names:
@@ -338,10 +258,9 @@ class ReferenceBackend:
             if len(frames) != 1:
                 raise UnsupportedModel(f"contact {contact!r} spans frames {sorted(frames)}")
             site = members[0].frame
-            if not self._model.existFrame(site):
-                raise UnsupportedModel(f"{self.path}: site {site!r} is not a model frame")
-            self._foot_bodies.add(site_bodies.get(site, ""))
             frame = self._model.frames[self._model.getFrameId(site)]
+            self._foot_frames.add(site if frame.type == pin.FrameType.BODY else "")
+            self._foot_frames.add(self._model.frames[frame.parentFrame].name)
             points_in_joint = np.array(
                 [frame.placement.act(np.array(p.point_in_frame, float)) for p in members]
             )
@@ -379,14 +298,18 @@ class ReferenceBackend:
         self._contact_wrench = np.zeros((len(self._blocks), 6))
         self._contact_flags = [False] * len(self._blocks)
 
-    def _setup_non_foot_geoms(self) -> None:
+    def _setup_non_foot_geoms(self, description: RobotDescription) -> None:
+        """Collision points of every body but the feet (and what hangs from them), per joint."""
+        feet = [i for i, body in enumerate(description.bodies) if body.name in self._foot_frames]
+        on_feet = {i for foot in feet for i in subtree(description.bodies, foot)}
         by_joint: dict[int, list[np.ndarray]] = {}
-        for body, corners in box_corners_in_bodies(self.path).items():
-            if body in self._foot_bodies or body not in self._bodies:
+        for index, body in enumerate(description.bodies):
+            if index in on_feet or not len(body.collision_points):
                 continue
-            joint, placement = self._bodies[body]
-            by_joint.setdefault(joint, []).append(
-                corners @ placement.rotation.T + placement.translation
+            frame = self._model.frames[body.frame_id]
+            placement = frame.placement
+            by_joint.setdefault(frame.parentJoint, []).append(
+                body.collision_points @ placement.rotation.T + placement.translation
             )
         # Per joint: its corners and their farthest distance from the joint
         # origin, to skip bodies well above the ground without rotating corners.

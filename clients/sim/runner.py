@@ -27,17 +27,16 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from clients.client import ControllerClient, CurveKeys, ServerError, ServerTimeout
-from clients.layout import joint_slices, neutral_joint_position
+from clients.layout import joint_slices
 from clients.sim.backend import PhysicsBackend, Push
 from clients.sim.errors import ScenarioError
 from clients.sim.imu import SimulatedImu
-from clients.sim.model_file import hello_model, resolve_model_path
+from clients.sim.model_file import describe_model, hello_model
 from clients.sim.scenario import Scenario
 from clients.state import RobotState
-from protocol.messages import Command, Diagnostics, Welcome
+from protocol.messages import Command, ContactSpec, Diagnostics, Welcome
 
 __all__ = [
     "FALL_TILT_RAD",
@@ -59,35 +58,49 @@ FALL_HEIGHT_FRACTION = 0.5
 def make_backend(scenario: Scenario) -> PhysicsBackend:
     """The scenario's physics backend at its physics rate and friction."""
     return physics_backend(
-        scenario.backend, scenario.model, scenario.physics_rate_hz, scenario.friction_coefficient
+        scenario.backend,
+        scenario.model,
+        scenario.physics_rate_hz,
+        scenario.friction_coefficient,
+        contacts=scenario.contacts,
+        keyframe=scenario.keyframe,
     )
 
 
 def physics_backend(
-    backend: str, model: str, physics_rate_hz: float, friction_coefficient: float
+    backend: str,
+    model: str,
+    physics_rate_hz: float,
+    friction_coefficient: float,
+    *,
+    contacts: list[ContactSpec] | None = None,
+    keyframe: str | None = None,
 ) -> PhysicsBackend:
     """A backend by name (``reference`` or ``mujoco``) for ``model``, at a rate and friction."""
-    timestep_s = 1.0 / physics_rate_hz
+    options: dict[str, Any] = {
+        "friction_coefficient": friction_coefficient,
+        "timestep_s": 1.0 / physics_rate_hz,
+        "contacts": contacts,
+        "keyframe": keyframe,
+    }
     if backend == "mujoco":
         from clients.sim.mujoco_backend import MujocoBackend
 
-        return MujocoBackend(
-            model, friction_coefficient=friction_coefficient, timestep_s=timestep_s
-        )
+        return MujocoBackend(model, **options)
     from clients.sim.reference import ReferenceBackend
 
-    return ReferenceBackend(model, friction_coefficient=friction_coefficient, timestep_s=timestep_s)
+    return ReferenceBackend(model, **options)
 
 
 def standing_state(welcome: Welcome, joint_overrides: dict[str, list[float]]) -> RobotState:
-    """Neutral pose (with overrides) at the standing height, at rest.
+    """The server's standing pose (with joint overrides), at rest.
 
     Raises:
         ScenarioError: An override names a joint the robot lacks (the message
             suggests the closest and lists them all) or has the wrong length.
     """
     joints = list(welcome.joints)
-    position = neutral_joint_position(joints)
+    position = RobotState.standing(welcome).joint_position.copy()
     slices = joint_slices(joints)
     for name, value in joint_overrides.items():
         if name not in slices:
@@ -235,6 +248,8 @@ def run_scenario(
     with ControllerClient(endpoint, timeout_s=timeout_s, curve=curve, record=log_path) as client:
         welcome = client.connect(
             **hello_model(scenario.model),
+            contacts=scenario.contacts,
+            keyframe=scenario.keyframe,
             controller=scenario.controller,
             # Only the weighted controllers have a measured mode; distributed is their default.
             params={**scenario.params, **({"ground_force_mode": "measured"} if measured else {})},
@@ -253,11 +268,7 @@ def run_scenario(
         flags = backend.contact_flags()  # at rest on the ground: every touching foot supports
         held_command = None  # with a command delay: the previous tick's command
         # Pipelined runs predict the state with a Pinocchio model of the same file.
-        model = (
-            pin.buildModelFromMJCF(str(resolve_model_path(scenario.model)))
-            if scenario.command_delay_ticks
-            else None
-        )
+        model = describe_model(scenario.model).model if scenario.command_delay_ticks else None
         state = backend.state()
         start = time.perf_counter()
         try:

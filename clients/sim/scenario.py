@@ -21,7 +21,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from clients.sim.backend import Push
 from clients.sim.errors import ScenarioError, ScenarioNotFound
 from clients.sim.imu import ImuSpec
-from clients.sim.model_file import body_names, resolve_model_path
+from clients.sim.model_file import DescriptionError, body_names, describe_model
+from protocol.messages import ContactSpec
 
 __all__ = [
     "SCENARIO_DIR",
@@ -72,7 +73,21 @@ class Scenario(BaseModel):
 
     name: str = Field(description="Scenario name (report and plot titles).")
     description: str = Field(default="", description="What it shows.")
-    model: str = Field(default="thesis_humanoid", description="Built-in model or MJCF path.")
+    model: str = Field(
+        default="thesis_humanoid",
+        description="Built-in model, or an MJCF (a scene with includes is fine) or URDF path.",
+    )
+    keyframe: str | None = Field(
+        default=None,
+        description="MJCF keyframe of the standing pose: the initial joints and base pose, the "
+        "controller's reference pose and CM height (default: the file's pose).",
+    )
+    contacts: list[ContactSpec] | None = Field(
+        default=None,
+        description="The feet, as in `hello.contacts`: tables with `name` and `frame` (a body "
+        "or site), and `points_in_frame` to give the sole yourself; without points the sole is "
+        "found from the body's collision geometry. Default: found automatically.",
+    )
     controller: str = Field(default="momentum", description="Server controller.")
     params: dict[str, Any] = Field(default_factory=dict, description="Controller parameters.")
     backend: Literal["reference", "mujoco"] = Field(default="reference")
@@ -190,10 +205,13 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> Scenario:
     except ValidationError as exc:
         raise ScenarioError(f"scenario {str(name_or_path)!r}: {explain(exc)}") from exc
     try:
-        model_path = resolve_model_path(scenario.model)
+        describe_model(scenario.model, contacts=scenario.contacts, keyframe=scenario.keyframe)
     except FileNotFoundError as exc:
         raise ScenarioError(f"scenario {str(name_or_path)!r}: {exc}") from exc
-    bodies = body_names(model_path)
+    except DescriptionError as exc:
+        key = {"model": "model", "contacts": "contacts", "keyframe": "keyframe"}[exc.field]
+        raise ScenarioError(f"scenario {str(name_or_path)!r}: {key}: {exc}") from None
+    bodies = body_names(scenario.model)
     _check_push_bodies(str(name_or_path), scenario, bodies)
     if scenario.imu.body and bodies and scenario.imu.body not in bodies:
         close = difflib.get_close_matches(scenario.imu.body, bodies, n=1)

@@ -1,7 +1,7 @@
-"""The ``poise`` command line: ``poise serve``, ``poise sim``, ``poise demo``, ``poise list``, ….
+"""The ``poise`` command line: ``poise serve``, ``sim``, ``demo``, ``list``, ``inspect``, ….
 
 One module per group of subcommands (``serve``, ``runs``, ``logs``,
-``listing``), each adding its parsers; a handler takes the parsed
+``listing``, ``inspect``), each adding its parsers; a handler takes the parsed
 arguments. A mistake the user can fix (a scenario, an endpoint, no server
 answering) is one line on stderr and exit code 2;
 ``poise --debug`` shows its traceback instead. The module imports nothing
@@ -17,7 +17,7 @@ import sys
 from collections.abc import Sequence
 
 from controller_server.blas import default_to_single_threaded_blas
-from controller_server.cli import bridge, listing, logs, runs, serve
+from controller_server.cli import bridge, inspect, listing, logs, runs, serve
 from controller_server.cli.common import CONTROLLER_NAMES, UsageError, as_usage_error
 
 __all__ = ["CONTROLLER_NAMES", "UsageError", "build_parser", "main"]
@@ -41,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="show the traceback of an error instead of its one-line message",
     )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for group in (serve, runs, bridge, logs, listing):
+    for group in (serve, runs, bridge, logs, listing, inspect):
         group.add_parsers(commands)
     return parser
 

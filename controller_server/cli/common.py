@@ -47,6 +47,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     from clients.client import ServerError, ServerTimeout
     from clients.sim.errors import ScenarioError, UnsupportedModel
     from clients.sim.output import OutputBusy
+    from controller_server.models.description import DescriptionError
     from protocol.endpoints import InvalidEndpoint
     from protocol.errors import ErrorCode
 
@@ -61,7 +62,8 @@ def as_usage_error(exc: Exception) -> UsageError | None:
         | OutputBusy
         | BridgeConfigError
         | BridgeStartError
-        | BusError,
+        | BusError
+        | DescriptionError,
     ):
         return UsageError(str(exc))
     return None

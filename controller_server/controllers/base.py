@@ -198,8 +198,9 @@ class Controller(ABC):
         """Default of a parameter; model-dependent ones are derived from the robot.
 
         Shared model-dependent defaults: the standing pose's joints (the
-        keyframe's, or the file's pose) for ``reference_joint_position``, all ones for ``support_mask``, the
-        model's μ for ``friction_coefficients``. Override for others.
+        keyframe's, or the file's) for ``reference_joint_position``, all ones
+        for ``support_mask``, the model's μ for ``friction_coefficients``.
+        Override for others.
         """
         robot = self.robot
         if key == "reference_joint_position":

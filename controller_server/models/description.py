@@ -61,6 +61,7 @@ __all__ = [
     "describe",
     "expand_mjcf",
     "gather_files",
+    "subtree",
 ]
 
 FOOT_HEIGHT_TOLERANCE_M = 0.02
@@ -323,6 +324,8 @@ class RobotDescription:
         standing_configuration: Pinocchio ``q`` of the standing pose, soles at z = 0.
         keyframes: Names of the file's keyframes.
         keyframe: The keyframe the standing pose comes from (``None``: the file's pose).
+        contacts_source: Where the contacts come from: ``given``, ``sole sites``
+            or ``collision geometry``.
         warnings: What a user should know (unactuated joints, converted actuators …).
     """
 
@@ -337,6 +340,7 @@ class RobotDescription:
     standing_configuration: np.ndarray
     keyframes: tuple[str, ...]
     keyframe: str | None
+    contacts_source: str
     warnings: tuple[str, ...] = field(default=())
 
     @property
@@ -403,10 +407,11 @@ def describe(
     pin.framesForwardKinematics(model, data, q)
     if contacts is not None:
         found = [_named_contact(spec, model, data, draft.bodies) for spec in contacts]
+        source = "given"
     elif draft.sole_sites:
-        found = draft.sole_sites
+        found, source = draft.sole_sites, "sole sites"
     else:
-        found = _find_feet(model, data, draft.bodies)
+        found, source = _find_feet(model, data, draft.bodies), "collision geometry"
     if not found:
         raise DescriptionError("no contacts: name the feet (`contacts`)", field="contacts")
     lowest = min(
@@ -428,6 +433,7 @@ def describe(
         standing_configuration=q,
         keyframes=tuple(draft.keyframes),
         keyframe=keyframe,
+        contacts_source=source,
         warnings=tuple(draft.warnings),
     )
 
@@ -854,7 +860,8 @@ def _urdf_mesh_points(
 # -- contacts from geometry --------------------------------------------------------------
 
 
-def _subtree(bodies: Sequence[Body], top: int) -> list[int]:
+def subtree(bodies: Sequence[Body], top: int) -> list[int]:
+    """Indices of body ``top`` and its descendants in ``bodies`` (parents before children)."""
     inside = [top]
     for index in range(top + 1, len(bodies)):
         if bodies[index].parent in inside:
@@ -875,7 +882,7 @@ def _sole(
     model: pin.Model, data: pin.Data, bodies: Sequence[Body], top: int, frame_id: int
 ) -> np.ndarray:
     """Corners (in the frame) of the sole rectangle of the foot ``top`` and its descendants."""
-    world = np.vstack([_points_in_world(data, bodies[b]) for b in _subtree(bodies, top)])
+    world = np.vstack([_points_in_world(data, bodies[b]) for b in subtree(bodies, top)])
     if len(world) == 0:
         raise DescriptionError(
             f"body {bodies[top].name!r} has no collision geometry to find a sole on; "

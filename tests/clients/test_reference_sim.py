@@ -14,14 +14,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from clients.sim.backend import Push
-from clients.sim.model_file import builtin_model_path
-from clients.sim.reference import (
-    BodyNotFound,
-    ReferenceBackend,
-    SimulationDiverged,
-    box_corners_in_bodies,
-    mjcf_gravity_in_world,
-)
+from clients.sim.model_file import builtin_model_path, describe_model
+from clients.sim.reference import BodyNotFound, ReferenceBackend, SimulationDiverged
 from clients.state import RobotState
 
 GRAVITY_M_PER_S2 = 9.81
@@ -446,18 +440,20 @@ def test_box_corners_match_mujoco(tmp_path):
         ]
         corners_body = (corners_world - mj_data.xpos[mj_model.geom_bodyid[geom]]) @ rotation_body
         expected.setdefault(body, []).append(corners_body)
-    corners = box_corners_in_bodies(Path(path))
+    corners = {
+        body.name: body.collision_points
+        for body in describe_model(path).bodies
+        if len(body.collision_points)
+    }
     assert corners.keys() == expected.keys()
     for body, blocks in expected.items():
         np.testing.assert_allclose(corners[body], np.vstack(blocks), atol=1e-6)
 
 
 def test_gravity_comes_from_the_mjcf_option(tmp_path):
-    np.testing.assert_allclose(
-        mjcf_gravity_in_world(builtin_model_path("dino_biped")), [0, 0, -9.81]
-    )
+    np.testing.assert_allclose(describe_model("dino_biped").model.gravity.linear, [0, 0, -9.81])
     chain = write_model(tmp_path, CHAIN_MJCF, "chain")
-    np.testing.assert_allclose(mjcf_gravity_in_world(Path(chain)), 0.0)
+    np.testing.assert_allclose(describe_model(chain).model.gravity.linear, 0.0)
     backend = ReferenceBackend(chain, ground_height_m=-100.0)
     backend.step(np.zeros(4), [])
     np.testing.assert_allclose(backend.velocity, 0.0, atol=1e-15)
