@@ -11,9 +11,9 @@ in ``welcome``. Every field declares its shape, unit and frame, and
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, model_validator
 
 from protocol.arrays import (
     MAX_ABS_ACCELERATION,
@@ -72,6 +72,10 @@ PROTOCOL_VERSION = 2
 ParamValue = float | int | bool | str | list[float] | dict[str, float | str | list[float]] | None
 """A controller parameter: a number, flag, name, vector, a small record
 (e.g. a point target), or ``null`` (remove, e.g. a point target)."""
+
+
+LoggedBytes = Annotated[bytes, WithJsonSchema({"type": "string", "contentEncoding": "base64"})]
+"""A file's bytes: binary on the wire (msgpack), base64 in a JSON log (protocol.recording)."""
 
 
 def wire_field(
@@ -146,7 +150,7 @@ class Hello(Message):
     model_format: Literal["mjcf", "urdf"] = wire_field(
         "Format of `model_text` (a `model` path ending in `.urdf` is URDF).", default="mjcf"
     )
-    model_assets: dict[str, bytes] | None = wire_field(
+    model_assets: dict[str, LoggedBytes] | None = wire_field(
         "Files `model_text` names (`<include>`d MJCF, meshes), by the path it names them "
         'with, relative to its directory, e.g. `{"robot.xml": …, "assets/foot.stl": …}`. '
         "A sent model reads no other file.",

@@ -25,6 +25,7 @@ process killed mid-run loses at most the messages of the last interval.
 
 from __future__ import annotations
 
+import base64
 import json
 import logging
 import math
@@ -111,9 +112,11 @@ class LoggedMessage:
 
 
 def _fields(value: Any) -> Any:
-    """Orjson's fallback: a message (or nested model) as its fields."""
+    """Orjson's fallback: a message (or nested model) as its fields, bytes (files) as base64."""
     if isinstance(value, BaseModel):
         return {name: getattr(value, name) for name in type(value).model_fields}
+    if isinstance(value, bytes):
+        return base64.b64encode(value).decode("ascii")
     raise TypeError(f"cannot log a {type(value).__name__}")
 
 
@@ -146,6 +149,10 @@ def _revive(annotation: Any, value: Any) -> Any:
             key: _revive(fields[key].annotation, item) if key in fields else item
             for key, item in value.items()
         }
+    if annotation is bytes and isinstance(value, str):
+        return base64.b64decode(value)
+    if typing.get_origin(annotation) is typing.Annotated:
+        return _revive(typing.get_args(annotation)[0], value)
     if annotation is np.ndarray and isinstance(value, list):
         return [math.nan if item is None else item for item in value]
     if origin in (typing.Union, types.UnionType):

@@ -113,6 +113,9 @@ def run_scenarios(
 
 
 def _print_table(reports: list[dict[str, Any]]) -> None:
+    notes = {(r["scenario"], note) for r in reports for note in r.get("model_notes", [])}
+    for scenario, note in sorted(notes):
+        print(f"note ({scenario}): {note}")
     width = max([24, *(len(r["scenario"]) + 2 for r in reports)])
     print(
         f"{'scenario':<{width}}{'backend':<10}{'result':<16}{'CM exc. m':>10}{'COP in':>8}"

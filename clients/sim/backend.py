@@ -68,6 +68,8 @@ class PhysicsBackend(Protocol):
     name: str
     time_s: float
     timestep_s: float
+    conversions: list[str]
+    """What the backend changed in the model file to simulate what the server controls."""
 
     def reset(self, state: RobotState) -> None:
         """Put the robot in ``state`` at time 0 (velocities included)."""

@@ -174,6 +174,7 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
         "complete": not record.stopped,
         "stopped": record.stopped,
         "simulated_s": record.simulated_s,
+        "model_notes": record.model_notes,
     }
     if not record.commands:
         return outcome

@@ -219,6 +219,7 @@ class ReferenceBackend:
         except DescriptionError as exc:
             raise UnsupportedModel(f"{self.path}: {exc}") from None
         self.description = description
+        self.conversions: list[str] = []  # Pinocchio takes the file as it is
         self._model = pin.Model(description.model)
         if gravity_in_world_m_per_s2 is not None:
             gravity = np.asarray(gravity_in_world_m_per_s2, dtype=float).reshape(3)

@@ -136,6 +136,8 @@ class RunRecord:
     fall_reason: str = ""
     stopped: str = ""
     """Why the run ended before ``duration_s`` without a fall ("": it did not)."""
+    model_notes: list[str] = field(default_factory=list)
+    """What the backend changed so it simulates what the server controls (servos → motors …)."""
     wall_time_s: float = 0.0
 
     def diagnostics(self) -> list[Diagnostics]:
@@ -261,7 +263,7 @@ def run_scenario(
         if imu is not None:
             imu.reset(backend.state(), backend.time_s)
         standing_height_m = welcome.standing_position_base_in_world[2]
-        record = RunRecord(scenario, welcome)
+        record = RunRecord(scenario, welcome, model_notes=list(backend.conversions))
         ticks = round(scenario.duration_s * scenario.control_rate_hz)
         steps = scenario.physics_steps_per_control_tick
         changes = list(scenario.param_changes)

@@ -27,6 +27,12 @@ def _sim(args: argparse.Namespace) -> int:
         overrides["controller"] = args.controller
     if args.base_state:
         overrides["base_state"] = args.base_state
+    if args.model:
+        overrides["model"] = args.model
+    if args.keyframe:
+        overrides["keyframe"] = args.keyframe
+    if args.contacts:
+        overrides["contacts"] = [{"name": frame, "frame": frame} for frame in args.contacts]
     check_endpoint_option("--connect", args.connect)
     curve = curve_keys(args)
     if not args.sweep_push:
@@ -102,6 +108,25 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="how the base reaches the server for every scenario: the simulator's truth, or a "
         "simulated IMU's readings that the server estimates it from (default: each "
         "scenario's own)",
+    )
+    sim.add_argument(
+        "--model",
+        metavar="MODEL",
+        help="robot for every scenario: a built-in name, or an MJCF (a scene with includes is "
+        "fine) or URDF file (default: each scenario's own; see `poise inspect MODEL`)",
+    )
+    sim.add_argument(
+        "--keyframe",
+        metavar="NAME",
+        help="MJCF keyframe of the standing pose for every scenario: initial pose, reference "
+        "pose and CM height (default: each scenario's own)",
+    )
+    sim.add_argument(
+        "--contacts",
+        nargs="+",
+        metavar="FRAME",
+        help="the feet's bodies (or sites) for every scenario, soles found from their collision "
+        "geometry (default: each scenario's own, else found automatically)",
     )
     sim.add_argument(
         "--output",

@@ -220,10 +220,11 @@ def _read(read: FileReader | None, path: str, what: str) -> bytes:
         )
     try:
         return read(path)
-    except DescriptionError:
-        raise
+    except DescriptionError as exc:
+        raise DescriptionError(f"{what} names {path!r}: {exc}") from None
     except (OSError, KeyError, ValueError) as exc:
-        raise DescriptionError(f"{what} names {path!r}, which cannot be read: {exc}") from None
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise DescriptionError(f"{what} names {path!r}, which cannot be read: {reason}") from None
 
 
 def _inline_includes(

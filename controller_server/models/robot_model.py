@@ -312,7 +312,10 @@ def load_robot_model(
 def _reader(files: dict[str, bytes]) -> Callable[[str], bytes]:
     def read(path: str) -> bytes:
         if path not in files:
-            raise KeyError(f"not among the {len(files)} files sent with the model")
+            raise DescriptionError(
+                "it is not among the files sent with the model (`model_assets`); a sent "
+                "model reads no other file"
+            )
         return files[path]
 
     return read
@@ -326,8 +329,7 @@ def _server_reader(directory: Path) -> Callable[[str], bytes]:
             return MODEL_ASSET_FILES.read_bytes(str(directory / relative))[1]
         except ServerFault as exc:
             raise DescriptionError(
-                f"{relative!r} is not a readable file in the server's model directories "
-                f"({exc.detail})"
+                f"it is not a readable file in the server's model directories ({exc.detail})"
             ) from None
 
     return read
