@@ -11,8 +11,6 @@ from pathlib import Path
 
 import pytest
 
-from controller_server.models import BUILTIN_MODELS
-
 TIMEOUT_S = 90  # the slowest case waits out the client's 10 s hello timeout
 
 
@@ -28,13 +26,10 @@ def scenario(directory: Path, text: str) -> str:
     return str(path)
 
 
-def no_floor(directory: Path) -> Path:
-    """The thesis humanoid without its floor plane (issue 18: vendors ship it in a scene)."""
-    text = BUILTIN_MODELS["thesis_humanoid"].read_text()
-    floor = '<geom name="floor" type="plane" size="0 0 1" contype="0" conaffinity="1"/>'
-    assert floor in text
-    path = directory / "no_floor.xml"
-    path.write_text(text.replace(floor, ""))
+def scene_without_robot(directory: Path) -> Path:
+    """A vendor-style scene whose ``<include>``d robot file is missing (issue 18)."""
+    path = directory / "scene.xml"
+    path.write_text('<mujoco><include file="robot.xml"/><worldbody/></mujoco>')
     return path
 
 
@@ -98,9 +93,24 @@ MISTAKES = [
         ["initial_joint_position.left_knee = 0.3: give a list", "[x, y, z, w]"],
     ),
     (
-        "a model without a floor in MuJoCo",
-        lambda d: sim(d, scenario(d, f'model = "{no_floor(d)}"\nbackend = "mujoco"\n')),
-        ["no floor: add a plane geom to the world body"],
+        "a scene whose included robot is missing",
+        lambda d: sim(d, scenario(d, f'model = "{scene_without_robot(d)}"\n')),
+        ["model: <include file> names 'robot.xml', which cannot be read: No such file"],
+    ),
+    (
+        "a keyframe the model does not have",
+        lambda d: sim(d, "stand", "--keyframe", "home"),
+        ["keyframe: no keyframe 'home' in the model; keyframes: none"],
+    ),
+    (
+        "a misspelled foot",
+        lambda d: sim(d, "stand", "--contacts", "left_fot", "right_foot"),
+        ["contacts: no frame 'left_fot' in the model; did you mean 'left_foot'?"],
+    ),
+    (
+        "inspect a file that is not there",
+        lambda d: ["inspect", "robot.xml"],
+        ["model file 'robot.xml' does not exist"],
     ),
     (
         "misspelled imu body",

@@ -86,7 +86,7 @@ def report_lines(description: RobotDescription) -> list[str]:
             span = f"[{low:.2f}, {high:.2f}]" if np.isfinite([low, high]).all() else "unlimited"
         kind = description.actuator_kind.get(name, "none")
         lines.append(
-            f"  {name:<28}{_kind(joint):<10}{span:<18}"
+            f"  {name:<28} {_kind(joint):<10}{span:<18}"
             f"{f'{limit:g}' if np.isfinite(limit) else 'none':<8}"
             f"{_ACTUATOR_NOTES.get(kind, kind)}"
         )
@@ -95,7 +95,7 @@ def report_lines(description: RobotDescription) -> list[str]:
         points = ", ".join(
             "(" + ", ".join(f"{c:.3f}" for c in point) + ")" for point in contact.points_in_frame
         )
-        lines.append(f"  {contact.name:<14}{contact.frame:<24}{points}")
+        lines.append(f"  {contact.name:<14} {contact.frame:<24} {points}")
     lines += [f"warning: {warning}" for warning in description.warnings]
     return lines
 

@@ -40,22 +40,16 @@ def _list_lines(what: str, model: str | None) -> list[str]:
         return builtin_model_names()
     if what == "controllers":
         return [f"{name}{'  (default)' if name == 'momentum' else ''}" for name in CONTROLLER_NAMES]
-    from clients.sim.model_file import body_names, resolve_model_path
-
-    try:
-        path = resolve_model_path(str(model))
-    except FileNotFoundError as exc:
-        raise UsageError(str(exc)) from exc
-    if what == "bodies":
-        return body_names(path)
+    from clients.sim.model_file import body_names, hello_model
     from controller_server.errors import ModelError
     from controller_server.models import load_robot_model
 
     try:
-        robot = load_robot_model(
-            model_text=path.read_text(),
-            model_format="urdf" if path.suffix.lower() == ".urdf" else "mjcf",
-        )
+        if what == "bodies":
+            return body_names(str(model))
+        robot = load_robot_model(**hello_model(str(model)))
+    except FileNotFoundError as exc:
+        raise UsageError(str(exc)) from exc
     except ModelError as exc:
         raise UsageError(f"{model}: {exc}") from exc
     # One line per joint in wire order, with what initial_joint_position takes for it.

@@ -496,3 +496,31 @@ def test_divergence_raises_instead_of_teleporting(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="finite"):
         backend.step(np.full(model.nv - 6, np.nan), [])
     assert list(tmp_path.iterdir()) == [], "MuJoCo's warning went to a log file in the cwd"
+
+
+def test_position_servos_become_torque_motors_that_keep_their_force_limits():
+    """A vendor's ``<position>`` servos (issue 18): the torque sent is the torque applied."""
+    from pathlib import Path
+
+    scene = Path(__file__).resolve().parents[1] / "models" / "vendor_humanoid" / "scene.xml"
+    backend = MujocoBackend(str(scene), keyframe="home")
+    model, data = backend.model, backend.data
+    assert (model.actuator_gaintype == int(mujoco.mjtGain.mjGAIN_FIXED)).all()
+    assert (model.actuator_biastype == int(mujoco.mjtBias.mjBIAS_NONE)).all()
+    np.testing.assert_array_equal(model.actuator_gainprm[:, 0], 1.0)
+    assert not model.actuator_ctrllimited.any()
+    q = backend.description.standing_configuration
+    backend.reset(
+        RobotState(q[7:].copy(), np.zeros(model.nv - 6), q[:3], q[3:7], np.zeros(3), np.zeros(3))
+    )
+    names = list(backend.joint_names)
+    torque = np.zeros(len(names))
+    torque[names.index("left_knee")] = 5.0
+    torque[names.index("neck_yaw")] = 50.0  # beyond its 20 N·m forcerange
+    torque[names.index("torso_yaw")] = -95.0  # beyond the joint's 90 N·m actuatorfrcrange
+    backend.step(torque, [])
+    applied = {name: data.qfrc_actuator[model.joint(name).dofadr[0]] for name in names}
+    assert applied["left_knee"] == pytest.approx(5.0)
+    assert applied["neck_yaw"] == pytest.approx(20.0)
+    assert applied["torso_yaw"] == pytest.approx(-90.0)
+    assert applied["right_knee"] == pytest.approx(0.0)

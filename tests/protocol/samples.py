@@ -34,6 +34,7 @@ def sample_messages():
             model_hash="0" * 64,
             total_mass=65.0,
             standing_position_base_in_world=(0.0, 0.0, 1.0),
+            standing_joint_position=[0.3],
             joints=[
                 JointInfo(
                     name="knee",
@@ -117,4 +118,12 @@ def sample_messages():
         ),
         Bye(seq=5),
         Error(seq=6, code=ErrorCode.BAD_SHAPE, field="joint_position", detail="expected 3"),
+        # A sent scene with the files it names (binary: not UTF-8), a keyframe, a named foot.
+        Hello(
+            seq=7,
+            model_text='<mujoco><include file="robot.xml"/></mujoco>',
+            model_assets={"robot.xml": b"<mujoco/>", "assets/foot.stl": bytes(range(256))},
+            keyframe="home",
+            contacts=[ContactSpec(name="left_foot", frame="left_ankle_roll_link")],
+        ),
     ]
