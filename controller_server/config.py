@@ -43,7 +43,7 @@ class ServeConfig:
         max_message_bytes: Largest request answered; larger ones get
             ``LIMIT_EXCEEDED`` up to twice this size, beyond which ZeroMQ drops
             the connection.
-        max_model_bytes: Largest ``hello.model_text`` and model or clip file.
+        max_model_bytes: Largest ``hello.model_text``, file sent with it, and model or clip file.
         model_cache_entries: Parsed models each worker keeps (least recently used out).
         model_dirs: Directories whose files a client may name as model or clip.
         curve_secret_key: Server certificate (``poise keygen``) for CurveZMQ;

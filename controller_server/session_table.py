@@ -74,7 +74,8 @@ class SessionTable:
     """Sessions by key, and the request handling of one process.
 
     Args:
-        max_model_bytes: Largest ``hello.model_text`` accepted (bytes of UTF-8).
+        max_model_bytes: Largest ``hello.model_text`` (bytes of UTF-8) and file of
+            ``hello.model_assets`` accepted.
         record_dir: Record each session to ``<UTC time>-<session id>.mcap`` here.
     """
 
@@ -182,6 +183,15 @@ class SessionTable:
                 f"{self.max_model_bytes} bytes (`poise serve --max-model-bytes`)",
                 request.seq,
             )
+        for path, data in (request.model_assets or {}).items():
+            if len(data) > self.max_model_bytes:
+                raise ProtocolError(
+                    ErrorCode.LIMIT_EXCEEDED,
+                    "model_assets",
+                    f"file {path[:100]!r} of {len(data)} bytes exceeds the server's limit of "
+                    f"{self.max_model_bytes} bytes per file (`poise serve --max-model-bytes`)",
+                    request.seq,
+                )
         # Imported here: the broker keeps a table without sessions to answer requests
         # that have none, and never loads Pinocchio or a controller.
         from controller_server.session import Session

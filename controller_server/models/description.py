@@ -396,6 +396,7 @@ def describe(
     """
     draft = _read_urdf(text, read, name) if fmt == "urdf" else _read_mjcf(text, read)
     model = draft.model
+    model.name = name
     if keyframe is not None:
         if keyframe not in draft.keyframes:
             known = ", ".join(draft.keyframes) or "none"
@@ -513,7 +514,6 @@ class _PinocchioFromMujoco:
     def __init__(self, mj: mujoco.MjModel, root: int):
         self.mj = mj
         self.model = pin.Model()
-        self.model.name = mj.names[: mj.names.find(b"\0")].decode() if mj.names else "robot"
         self.joints: list[int] = []  # MuJoCo joint ids in Pinocchio order (free root excluded)
         self.bodies: list[Body] = []
         self._body_index: dict[int, int] = {}

@@ -181,6 +181,12 @@ def _check_caps(endpoint):
         padded = "<mujoco>" + " " * 60_000 + "</mujoco>"
         reply = peer.ask(Hello(model=None, model_text=padded))
         assert reply.code == ErrorCode.LIMIT_EXCEEDED and reply.field == "model_text"
+        # A file sent with a model (issue 18) has the same cap, and the session table lives on.
+        mesh = {"assets/foot.stl": b"\x00" * 60_000}
+        reply = peer.ask(Hello(model=None, model_text="<mujoco/>", model_assets=mesh))
+        assert reply.code == ErrorCode.LIMIT_EXCEEDED and reply.field == "model_assets"
+        assert "'assets/foot.stl' of 60000 bytes" in reply.detail
+        assert peer.ask(Hello(model="dino_biped", seq=2)).type == "welcome"
 
 
 def test_sessions_per_client_are_capped():
