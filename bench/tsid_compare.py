@@ -393,14 +393,8 @@ def load_robot(name: str, tsid_python: str | None) -> tuple[Any, Any, str, str]:
             f"{name} has multi-DoF joints ({', '.join(multi_dof)}); TSID's posture task "
             "needs 1-DoF joints: use revolute_humanoid or talos"
         )
+    # The URDF's root is at the origin; the server's standing pose has the soles on z = 0.
     welcome = Session(hello).welcome(0)
-    if name == "talos":  # the URDF's root is at the origin: lift it onto the soles
-        data = robot.model.createData()
-        pin.framesForwardKinematics(robot.model, data, pin.neutral(robot.model))
-        sole_height_m = min(data.oMf[c.frame_id].translation[2] for c in robot.contacts)
-        welcome = welcome.model_copy(
-            update={"standing_position_base_in_world": (0.0, 0.0, -sole_height_m)}
-        )
     return robot, welcome, path, model_format
 
 

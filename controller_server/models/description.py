@@ -964,7 +964,11 @@ def _find_feet(model: pin.Model, data: pin.Data, bodies: Sequence[Body]) -> list
         feet, names = [feet[k] for k in order], [names[k] for k in order]
     else:
         names = [bodies[i].name for i in feet]
+    # The points are in the frame the body's name resolves to (a joint of the same name
+    # would come first), as every user of the contact looks it up by name.
     return [
-        FoundContact(name, bodies[i].name, _sole(model, data, bodies, i, bodies[i].frame_id))
+        FoundContact(
+            name, bodies[i].name, _sole(model, data, bodies, i, model.getFrameId(bodies[i].name))
+        )
         for name, i in zip(names, feet, strict=True)
     ]
