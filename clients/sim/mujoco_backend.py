@@ -1,9 +1,16 @@
 """MuJoCo physics backend: an independent engine for the simulator's scenarios.
 
-The backend loads the same MJCF the server loads and speaks the wire
-conventions of ``docs/protocol.md`` (see :mod:`clients.sim.backend`). The
-conversions at the MuJoCo boundary, each checked against Pinocchio in
-``tests/clients/test_mujoco_backend.py``:
+The backend loads the same file the server loads — an MJCF with its
+includes and assets, or a URDF through MuJoCo's importer — and takes the
+robot, its contacts and its standing pose from the same reading
+(:mod:`controller_server.models.description`). Where the file cannot be
+simulated as the server controls it, the backend changes it and says so in
+:attr:`MujocoBackend.conversions`: position and velocity servos become
+torque motors with their force limits, a missing floor plane is added, a
+root without a free joint gets one, a URDF's joints get motors at their
+effort limits. It speaks the wire conventions of ``docs/protocol.md`` (see
+:mod:`clients.sim.backend`). The conversions at the MuJoCo boundary, each
+checked against Pinocchio in ``tests/clients/test_mujoco_backend.py``:
 
 * **Free joint.** ``qpos = [position in world, quaternion w x y z]``;
   ``qvel = [linear velocity of the body origin in WORLD axes, angular
@@ -14,15 +21,14 @@ conversions at the MuJoCo boundary, each checked against Pinocchio in
   its parent, ``qvel`` the child's angular velocity relative to the parent
   in the child (local) frame — the wire's convention once the quaternion is
   reordered to ``x y z w``.
-* **Joint order.** Wire order is the MJCF document order of the
-  ``<joint>`` elements, which is Pinocchio's depth-first order; addresses
-  are looked up by joint name (``jnt_qposadr`` / ``jnt_dofadr``), so a
-  client may pass the server's ``welcome`` order instead.
+* **Joint order.** Wire order is the server's (Pinocchio's) order of the
+  shared reading; addresses are looked up by joint name (``jnt_qposadr`` /
+  ``jnt_dofadr``), so a client may pass the server's ``welcome`` order.
 * **Torques.** Each wire DoF is driven by the one ``<motor>`` whose
   transmission is that joint and whose gear is non-zero only on that DoF;
   ``ctrl = torque / gear``. MuJoCo clamps ``ctrl`` to ``ctrlrange``, so a
-  torque beyond ``ctrlrange · gear`` is saturated (the server already stays
-  within those limits).
+  torque beyond ``ctrlrange · gear`` (or ``forcerange``, or the joint's
+  ``actuatorfrcrange``) is saturated (the server already stays within them).
 * **Contact forces.** :func:`mujoco.mj_contactForce` returns the force in
   the contact frame whose first axis, the normal, points from ``geom1`` to
   ``geom2``, with a positive (repulsive) normal component: it is the force

@@ -9,8 +9,12 @@ fixed 1 ms step by semi-implicit (symplectic) Euler::
     v ← v + Δt a
     q ← q ⊕ Δt v                      (``pinocchio.integrate``)
 
-Ground contact (thesis ch. 4.2: penalty forces) acts at the corners of each
-``*_sole`` box site. Per point below the ground, with depth ``d``:
+Ground contact (thesis ch. 4.2: penalty forces) acts at the contact points
+of the robot's reading shared with the server
+(:mod:`controller_server.models.description`): the corners of each
+``*_sole`` box site, or of the soles found from the feet's collision
+geometry, or the contacts a scenario names. Per point below the ground,
+with depth ``d``:
 
 * normal: ``f_n = max(0, k d − c ż)`` (pushes, never pulls);
 * tangential: a spring–damper anchored where the point touched down,
@@ -40,8 +44,9 @@ gain is about ``k_d I_body / (c Σ r²)``. At the earlier ``c = 1500 N·s/m``
 that gain was about 5 and quiet standing diverged in a period-2 oscillation
 within 30 ms; at ``10⁴`` it is below 1.
 
-"Non-foot contact" (a fall) is a corner of a box geom of any body other
-than the foot bodies below the ground; those corners get no forces.
+"Non-foot contact" (a fall) is a collision point (box and mesh vertices,
+sphere and capsule extremes …) of any body outside the feet below the
+ground; those points get no forces.
 """
 
 from __future__ import annotations
