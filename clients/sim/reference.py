@@ -315,19 +315,26 @@ class ReferenceBackend:
             frame = self._model.frames[body.frame_id]
             placement = frame.placement
             by_joint.setdefault(frame.parentJoint, []).append(
-                body.collision_points @ placement.rotation.T + placement.translation
+                np.column_stack(
+                    [
+                        body.collision_points @ placement.rotation.T + placement.translation,
+                        body.collision_radii,
+                    ]
+                )
             )
-        # Per joint: its corners and their farthest distance from the joint
-        # origin, to skip bodies well above the ground without rotating corners.
+        # Per joint: its points, their radii (round shapes) and their farthest
+        # reach from the joint origin, to skip bodies well above the ground
+        # without rotating points.
         self._non_foot_geoms = []
         for joint, blocks in sorted(by_joint.items()):
-            corners = np.vstack(blocks)
-            reach_m = float(np.max(np.linalg.norm(corners, axis=1)))
+            stacked = np.vstack(blocks)
+            corners, radii = stacked[:, :3].copy(), stacked[:, 3].copy()
+            reach_m = float(np.max(np.linalg.norm(corners, axis=1) + radii))
             chain_m, parent = 0.0, joint
             while parent > 1:
                 chain_m += float(np.linalg.norm(self._model.jointPlacements[parent].translation))
                 parent = self._model.parents[parent]
-            self._non_foot_geoms.append((joint, corners, reach_m, chain_m))
+            self._non_foot_geoms.append((joint, corners, radii, reach_m, chain_m))
         self._non_foot_contact = False
 
     # --------------------------------------------------------------- physics
@@ -355,7 +362,7 @@ class ReferenceBackend:
 
         self._non_foot_contact = False
         base_height = self._q[2]
-        for joint, corners, reach_m, chain_m in self._non_foot_geoms:
+        for joint, corners, radii, reach_m, chain_m in self._non_foot_geoms:
             # The joint is at most ``chain_m`` from the base origin: skip it unread
             # when even that leaves its geoms above the ground.
             if base_height - chain_m - reach_m > self.ground_height_m:
@@ -364,7 +371,7 @@ class ReferenceBackend:
             height = transform.translation[2]
             if height - reach_m > self.ground_height_m:
                 continue
-            if (corners @ transform.rotation[2]).min() + height < self.ground_height_m:
+            if (corners @ transform.rotation[2] - radii).min() + height < self.ground_height_m:
                 self._non_foot_contact = True
                 break
 

@@ -298,14 +298,25 @@ class Body:
         parent: Index of the parent body in :attr:`RobotDescription.bodies` (−1: the root).
         frame_id: Pinocchio frame of the body.
         collision_points: ``(k, 3)`` points of its collision geometry in the
-            body frame (m): box and mesh vertices, sphere, capsule, cylinder and
-            ellipsoid extremes along their axes and rims.
+            body frame (m): box and mesh vertices, cylinder rims, ellipsoid
+            extremes along their axes, and the centres of spheres and of
+            capsules' end spheres.
+        collision_radii: ``(k,)`` radius around each point (m): a sphere's or
+            capsule's radius, 0 for a vertex. The lowest point of a round
+            shape is its centre less its radius along the world's z.
     """
 
     name: str
     parent: int
     frame_id: int
     collision_points: np.ndarray
+    collision_radii: np.ndarray
+
+    @classmethod
+    def with_shapes(cls, name: str, parent: int, frame_id: int, shapes: list[np.ndarray]) -> Body:
+        """A body whose collision geometry is ``(k, 4)`` blocks of points and radii."""
+        stacked = np.vstack(shapes) if shapes else np.zeros((0, 4))
+        return cls(name, parent, frame_id, stacked[:, :3], stacked[:, 3])
 
 
 @dataclass(frozen=True)
@@ -416,6 +427,12 @@ def describe(
         found, source = _find_feet(model, data, draft.bodies), "collision geometry"
     if not found:
         raise DescriptionError("no contacts: name the feet (`contacts`)", field="contacts")
+    draft.warnings += [
+        f"contact {c.name!r} touches at {len(c.points_in_frame)} point(s) in the standing pose, "
+        "too few to balance on alone: give its points, or a keyframe with the foot flat"
+        for c in found
+        if source == "collision geometry" and len(c.points_in_frame) < 3
+    ]
     lowest = min(
         float(_to_world(data.oMf[model.getFrameId(c.frame)], c.points_in_frame)[:, 2].min())
         for c in found
@@ -509,6 +526,11 @@ class _PinocchioFromMujoco:
     (relative to the previous joint of the chain: ``T(−p_prev) T(p)``), and
     the body — inertia, frame, sites — hangs from the last one at ``T(−p)``.
     Bodies without joints are welded to their parent's joint.
+
+    Frames are looked up by name, and MuJoCo keeps bodies, joints and sites
+    in separate namespaces (a free joint ``root`` on a body ``root``): a
+    body's frame takes its name, a site's or a joint's only where no body
+    (nor, for a joint, a site) has it.
     """
 
     def __init__(self, mj: mujoco.MjModel, root: int):
@@ -520,6 +542,8 @@ class _PinocchioFromMujoco:
         self._placement: dict[int, tuple[int, pin.SE3]] = {}  # body → (pin joint, body in joint)
         self._site_frames: list[tuple[int, int]] = []  # (site id, frame id)
         self.root = root
+        self._body_names = {mj.body(b).name for b in range(mj.nbody)}
+        self._taken = self._body_names | {mj.site(s).name for s in range(mj.nsite)}
         gravity = mj.opt.gravity
         self.model.gravity = pin.Motion(np.array(gravity, float), np.zeros(3))
         free = [j for j in _body_joints(mj, root) if mj.jnt_type[j] == _FREE]
@@ -527,13 +551,17 @@ class _PinocchioFromMujoco:
         self._free_qpos = int(mj.jnt_qposadr[free[0]]) if free else None
         joint_name = mj.joint(free[0]).name if free and mj.joint(free[0]).name else "root_joint"
         joint = self.model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), joint_name)
-        self.model.addJointFrame(joint, 0)
+        self._add_joint_frame(joint)
         self._add_body(root, joint, pin.SE3.Identity(), skip_free=True)
         for body in range(root + 1, mj.nbody):
             if mj.body_rootid[body] == root:
                 parent_joint, parent_in_joint = self._placement[int(mj.body_parentid[body])]
                 offset = _se3(mj.body_pos[body], mj.body_quat[body])
                 self._add_body(body, parent_joint, parent_in_joint * offset, skip_free=False)
+
+    def _add_joint_frame(self, joint: int) -> None:
+        if self.model.names[joint] not in self._taken:
+            self.model.addJointFrame(joint, 0)
 
     def _add_body(self, body: int, joint: int, body_in_joint: pin.SE3, *, skip_free: bool) -> None:
         mj, model = self.mj, self.model
@@ -553,7 +581,7 @@ class _PinocchioFromMujoco:
                     f"a joint of body {mj.body(body).name!r} has no name; name every joint"
                 )
             joint = model.addJoint(joint, _joint_model(kind, mj.jnt_axis[j]), placement, name)
-            model.addJointFrame(joint, -1)
+            self._add_joint_frame(joint)
             v = model.joints[joint].idx_v
             model.armature[v : v + model.joints[joint].nv] = mj.dof_armature[
                 mj.jnt_dofadr[j] : mj.jnt_dofadr[j] + model.joints[joint].nv
@@ -575,19 +603,20 @@ class _PinocchioFromMujoco:
         )
         model.appendBodyToJoint(joint, inertia, body_in_joint)
         name = mj.body(body).name or f"body{body}"
-        parent_frame = model.getFrameId(model.names[joint], pin.JOINT)
+        parent = self._body_index.get(int(mj.body_parentid[body]), -1)
+        parent_frame = self.bodies[parent].frame_id if parent >= 0 else 0
         frame = model.addBodyFrame(name, joint, body_in_joint, parent_frame)
         for site in range(mj.nsite):
-            if mj.site_bodyid[site] == body and mj.site(site).name:
+            site_name = mj.site(site).name
+            if mj.site_bodyid[site] == body and site_name and site_name not in self._body_names:
                 placement = body_in_joint * _se3(mj.site_pos[site], mj.site_quat[site])
                 frame_id = model.addFrame(
                     pin.Frame(mj.site(site).name, joint, frame, placement, pin.OP_FRAME)
                 )
                 self._site_frames.append((site, frame_id))
         self._placement[body] = (joint, body_in_joint)
-        parent = self._body_index.get(int(mj.body_parentid[body]), -1)
         self._body_index[body] = len(self.bodies)
-        self.bodies.append(Body(name, parent, frame, _geom_points(mj, body)))
+        self.bodies.append(Body.with_shapes(name, parent, frame, _geom_shapes(mj, body)))
 
     def configuration(self, qpos: np.ndarray) -> np.ndarray:
         """Pinocchio ``q`` from a MuJoCo ``qpos`` (base from the free joint, or the body's pose)."""
@@ -648,17 +677,21 @@ def _joint_model(kind: int, axis: np.ndarray) -> pin.JointModel:
     )
 
 
-def _geom_points(mj: mujoco.MjModel, body: int) -> np.ndarray:
-    """Collision points of a body's colliding geoms, in the body frame."""
-    points = []
+def _geom_shapes(mj: mujoco.MjModel, body: int) -> list[np.ndarray]:
+    """Points and radii (``(k, 4)`` each) of a body's colliding geoms, in the body frame."""
+    shapes = []
     for geom in range(mj.ngeom):
         if mj.geom_bodyid[geom] != body or not (mj.geom_contype[geom] or mj.geom_conaffinity[geom]):
             continue
         local = _shape_points(int(mj.geom_type[geom]), mj.geom_size[geom], _mesh_vertices(mj, geom))
         if local is not None:
-            placement = _se3(mj.geom_pos[geom], mj.geom_quat[geom])
-            points.append(local @ placement.rotation.T + placement.translation)
-    return np.vstack(points) if points else np.zeros((0, 3))
+            shapes.append(_placed(local, _se3(mj.geom_pos[geom], mj.geom_quat[geom])))
+    return shapes
+
+
+def _placed(shape: np.ndarray, placement: pin.SE3) -> np.ndarray:
+    """``(k, 4)`` points and radii in a shape's frame → in the frame it is placed in."""
+    return np.column_stack([_to_world(placement, shape[:, :3]), shape[:, 3]])
 
 
 def _mesh_vertices(mj: mujoco.MjModel, geom: int) -> np.ndarray | None:
@@ -670,24 +703,31 @@ def _mesh_vertices(mj: mujoco.MjModel, geom: int) -> np.ndarray | None:
 
 
 def _shape_points(kind: int, size: np.ndarray, vertices: np.ndarray | None) -> np.ndarray | None:
-    """A primitive's points in its frame: vertices, axis extremes, rims (``None``: a plane)."""
-    axes = np.vstack([np.eye(3), -np.eye(3)])
+    """A primitive as ``(k, 4)`` points and radii in its frame (``None``: a plane, a height field).
+
+    Boxes and meshes: their vertices; cylinders: 16 points on each rim;
+    ellipsoids: their extremes along their axes; spheres: the centre with the
+    radius; capsules: both end spheres.
+    """
     rim = np.array(
         [(np.cos(a), np.sin(a), 0.0) for a in np.linspace(0, 2 * np.pi, 16, endpoint=False)]
     )
     if kind == _GEOM.mjGEOM_BOX:
-        return np.array([(sx, sy, sz) for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)]) * size
-    if kind == _GEOM.mjGEOM_SPHERE:
-        return axes * size[0]
-    if kind == _GEOM.mjGEOM_ELLIPSOID:
-        return axes * np.tile(size[:3], 2)
-    if kind == _GEOM.mjGEOM_CAPSULE:
-        return np.vstack([axes * size[0] + (0, 0, h) for h in (size[1], -size[1])])
-    if kind == _GEOM.mjGEOM_CYLINDER:
-        return np.vstack([rim * size[0] + (0, 0, h) for h in (size[1], -size[1])])
-    if kind == _GEOM.mjGEOM_MESH and vertices is not None:
-        return vertices
-    return None
+        signs = np.array([(sx, sy, sz) for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)])
+        points = signs * size
+    elif kind == _GEOM.mjGEOM_ELLIPSOID:
+        points = np.vstack([np.eye(3), -np.eye(3)]) * size[:3]
+    elif kind == _GEOM.mjGEOM_CYLINDER:
+        points = np.vstack([rim * size[0] + (0, 0, h) for h in (size[1], -size[1])])
+    elif kind == _GEOM.mjGEOM_MESH and vertices is not None:
+        points = vertices
+    elif kind == _GEOM.mjGEOM_SPHERE:
+        return np.array([[0.0, 0.0, 0.0, size[0]]])
+    elif kind == _GEOM.mjGEOM_CAPSULE:
+        return np.array([[0.0, 0.0, size[1], size[0]], [0.0, 0.0, -size[1], size[0]]])
+    else:
+        return None
+    return np.column_stack([points, np.zeros(len(points))])
 
 
 def _mjcf_actuation(
@@ -772,18 +812,17 @@ def _read_urdf(text: bytes | str, read: FileReader | None, name: str) -> _Draft:
     warnings: list[str] = []
     bodies: list[Body] = []
     for name in order:
-        points = [
-            _urdf_collision_points(c, read, warnings) for c in links[name].findall("collision")
+        shapes = [
+            _urdf_collision_shape(c, read, warnings) for c in links[name].findall("collision")
         ]
-        points = [p for p in points if p is not None]
         parent_name = parents.get(name)
         parent = next((i for i, b in enumerate(bodies) if b.name == parent_name), -1)
         bodies.append(
-            Body(
+            Body.with_shapes(
                 name,
                 parent,
                 model.getFrameId(name, pin.BODY),
-                np.vstack(points) if points else np.zeros((0, 3)),
+                [shape for shape in shapes if shape is not None],
             )
         )
     q = pin.neutral(model)
@@ -799,10 +838,10 @@ def _read_urdf(text: bytes | str, read: FileReader | None, name: str) -> _Draft:
     return _Draft(model, bodies, torque_limit, kinds, {}, q, {}, [], warnings)
 
 
-def _urdf_collision_points(
+def _urdf_collision_shape(
     collision: ET.Element, read: FileReader | None, warnings: list[str]
 ) -> np.ndarray | None:
-    """A URDF ``<collision>``'s points in its link frame (meshes read through MuJoCo)."""
+    """A URDF ``<collision>``'s points and radii in its link frame (meshes read by MuJoCo)."""
     origin = collision.find("origin")
     xyz = np.array((origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split(), float)
     rpy = np.array((origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split(), float)
@@ -826,7 +865,7 @@ def _urdf_collision_points(
         local = _urdf_mesh_points(shape, read, warnings)
     else:
         return None
-    return None if local is None else local @ rotation.T + xyz
+    return None if local is None else _placed(local, pin.SE3(rotation, xyz))
 
 
 def _urdf_mesh_path(filename: str) -> str:
@@ -853,9 +892,8 @@ def _urdf_mesh_points(
     except (DescriptionError, ValueError) as exc:
         warnings.append(f"collision mesh {filename!r} skipped: {exc}")
         return None
-    vertices = _mesh_vertices(mj, 0)
-    placement = _se3(mj.geom_pos[0], mj.geom_quat[0])
-    return vertices @ placement.rotation.T + placement.translation
+    shape = _shape_points(_GEOM.mjGEOM_MESH, np.zeros(3), _mesh_vertices(mj, 0))
+    return None if shape is None else _placed(shape, _se3(mj.geom_pos[0], mj.geom_quat[0]))
 
 
 # -- contacts from geometry --------------------------------------------------------------
@@ -875,15 +913,18 @@ def _to_world(placement: pin.SE3, points: np.ndarray) -> np.ndarray:
     return points @ placement.rotation.T + placement.translation
 
 
-def _points_in_world(data: pin.Data, body: Body) -> np.ndarray:
-    return _to_world(data.oMf[body.frame_id], body.collision_points)
+def _lowest_points_in_world(data: pin.Data, body: Body) -> np.ndarray:
+    """Each collision point's lowest point in the world: vertices, round shapes' bottoms."""
+    world = _to_world(data.oMf[body.frame_id], body.collision_points)
+    world[:, 2] -= body.collision_radii
+    return world
 
 
 def _sole(
     model: pin.Model, data: pin.Data, bodies: Sequence[Body], top: int, frame_id: int
 ) -> np.ndarray:
     """Corners (in the frame) of the sole rectangle of the foot ``top`` and its descendants."""
-    world = np.vstack([_points_in_world(data, bodies[b]) for b in subtree(bodies, top)])
+    world = np.vstack([_lowest_points_in_world(data, bodies[b]) for b in subtree(bodies, top)])
     if len(world) == 0:
         raise DescriptionError(
             f"body {bodies[top].name!r} has no collision geometry to find a sole on; "
@@ -934,7 +975,7 @@ def _named_contact(
 def _find_feet(model: pin.Model, data: pin.Data, bodies: Sequence[Body]) -> list[FoundContact]:
     """The feet: lowest bodies (standing) without a lowest ancestor, named by their side."""
     lowest = {
-        i: float(_points_in_world(data, b)[:, 2].min())
+        i: float(_lowest_points_in_world(data, b)[:, 2].min())
         for i, b in enumerate(bodies)
         if len(b.collision_points)
     }
@@ -953,9 +994,13 @@ def _find_feet(model: pin.Model, data: pin.Data, bodies: Sequence[Body]) -> list
             ancestor = bodies[ancestor].parent
         if ancestor < 0:
             feet.append(i)
+    # Left of the root's heading (its x axis on the ground; some files turn the root body).
     root = data.oMf[bodies[0].frame_id]
+    heading = root.rotation[:, 0] * (1.0, 1.0, 0.0)
+    heading = heading if np.linalg.norm(heading) > 1e-6 else np.array([1.0, 0.0, 0.0])
+    lateral = np.array([-heading[1], heading[0], 0.0])
     sides = [
-        float((root.rotation.T @ (data.oMf[bodies[i].frame_id].translation - root.translation))[1])
+        float((data.oMf[bodies[i].frame_id].translation - root.translation) @ lateral)
         for i in feet
     ]
     if len(feet) == 2 and sides[0] * sides[1] < 0:

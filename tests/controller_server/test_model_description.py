@@ -267,3 +267,57 @@ def test_what_cannot_be_read_says_why_on_one_line(text, message):
     with pytest.raises(DescriptionError, match=message) as info:
         describe(text, read=lambda path: files[path])
     assert "\n" not in str(info.value)
+
+
+CAPSULE_FEET = """
+<mujoco model="capsule_feet">
+  <compiler angle="degree"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="0 0 1"/>
+    <body name="root" pos="0 0 1">
+      <freejoint name="root"/>
+      <geom type="ellipsoid" size="0.1 0.15 0.2" mass="20"/>
+      <site name="root" pos="0 0 0.2"/>
+      <body name="left_leg" pos="0 0.1 -0.4">
+        <joint name="left_hip" axis="0 1 0"/>
+        <geom type="capsule" fromto="0 0 0 0 0 -0.4" size="0.04" mass="3"/>
+        <body name="left_shoe" pos="0 0 -0.5">
+          <joint name="left_ankle" axis="0 1 0"/>
+          <geom type="capsule" size="0.02 0.08" pos="0 0.03 -0.05" euler="0 90 0" mass="0.5"/>
+          <geom type="capsule" size="0.02 0.08" pos="0 -0.03 -0.05" euler="0 90 0" mass="0.5"/>
+        </body>
+      </body>
+      <body name="right_leg" pos="0 -0.1 -0.4">
+        <joint name="right_hip" axis="0 1 0"/>
+        <geom type="capsule" fromto="0 0 0 0 0 -0.4" size="0.04" mass="3"/>
+        <body name="right_shoe" pos="0 0 -0.5">
+          <joint name="right_ankle" axis="0 1 0"/>
+          <geom type="capsule" size="0.02 0.08" pos="0 0.03 -0.05" euler="0 90 0" mass="0.5"/>
+          <geom type="capsule" size="0.02 0.08" pos="0 -0.03 -0.05" euler="0 90 0" mass="0.5"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_capsule_feet_stand_on_their_bottoms_and_shared_names_resolve_to_bodies():
+    """Round shapes touch at their bottoms (a capsule along its segment), whatever their axes;
+    a free joint and a site named like their body (``root``, as in the CMU humanoid) leave
+    the name to the body."""
+    description = describe(CAPSULE_FEET)
+    left, right = description.contacts
+    assert (left.name, left.frame, right.frame) == ("left_foot", "left_shoe", "right_shoe")
+    np.testing.assert_allclose(
+        np.sort(left.points_in_frame, axis=0),
+        np.sort([[sx * 0.08, sy * 0.03, -0.07] for sx in (1, -1) for sy in (1, -1)], axis=0),
+        atol=1e-12,
+    )
+    model = description.model
+    assert model.frames[model.getFrameId("root")].type == pin.BODY
+    assert description.standing_configuration[2] == pytest.approx(1.0 + 0.4 + 0.5 + 0.07 - 1.0)
+    # The reader's points are MuJoCo's geoms: the ellipsoid's extremes along its axes.
+    compiled = mujoco.MjModel.from_xml_string(CAPSULE_FEET)
+    root = description.bodies[0]
+    np.testing.assert_allclose(np.abs(root.collision_points).max(axis=0), compiled.geom_size[1])
