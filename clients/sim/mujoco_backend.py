@@ -351,9 +351,12 @@ class MujocoBackend:
         self.contact_frames = tuple(c.frame for c in contacts)
         sites = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f) for f in self.contact_frames]
         bodies = [
-            int(model.site_bodyid[site]) if site >= 0 else model.body(frame).id
+            int(model.site_bodyid[site])
+            if site >= 0
+            else mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, frame)
             for site, frame in zip(sites, self.contact_frames, strict=True)
         ]
+
         self._reference_sites = [(index, site) for index, site in enumerate(sites) if site >= 0]
         self._reference_bodies = [
             (index, body)
@@ -405,6 +408,10 @@ class MujocoBackend:
         for contact in self.description.contacts:
             site = spec.site(contact.frame)
             body = site.parent if site is not None else spec.body(contact.frame)
+            if body is None:
+                raise self._fail(
+                    f"contact frame {contact.frame!r} is neither a body nor a site: name one"
+                )
             for geom in body.find_all(mujoco.mjtObj.mjOBJ_GEOM) + list(body.geoms):
                 geom.friction[0] = self.friction_coefficient
 

@@ -197,14 +197,17 @@ class Controller(ABC):
     def default_value(self, key: str) -> Any:
         """Default of a parameter; model-dependent ones are derived from the robot.
 
-        Shared model-dependent defaults: the standing pose's joints (the
-        keyframe's, or the file's) for ``reference_joint_position``, all ones
-        for ``support_mask``, the model's μ for ``friction_coefficients``.
-        Override for others.
+        Shared model-dependent defaults: the standing pose's joints and base
+        orientation (the keyframe's, or the file's) for
+        ``reference_joint_position`` and the reference base (trunk)
+        orientation, all ones for ``support_mask``, the model's μ for
+        ``friction_coefficients``. Override for others.
         """
         robot = self.robot
         if key == "reference_joint_position":
             return robot.standing_joint_position.copy()
+        if key in ("reference_base_orientation_xyzw", "reference_trunk_orientation_xyzw"):
+            return robot.standing_orientation_base_in_world_xyzw.copy()
         if key == "support_mask":
             return np.ones(len(robot.contacts))
         if key == "friction_coefficients":

@@ -117,14 +117,15 @@ class MomentumController(Controller):
             kind="vector",
             minimum=-1e3,
             maximum=1e3,
-            doc="fixed reference pose, wire joint order (rad; ball: xyzw); default neutral",
+            doc="fixed reference pose, wire joint order (rad; ball: xyzw); default the "
+            "standing pose's",
         ),
         "reference_base_orientation_xyzw": ParamSpec(
             [0.0, 0.0, 0.0, 1.0],
             kind="vector",
             minimum=-1.0,
             maximum=1.0,
-            doc="reference root orientation in world, scalar last",
+            doc="reference root orientation in world, scalar last; default the standing pose's",
         ),
         "clip": ParamSpec(
             "",

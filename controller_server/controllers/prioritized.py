@@ -216,7 +216,7 @@ class PrioritizedController(Controller):
             kind="vector",
             minimum=-1e3,
             maximum=1e3,
-            doc="rest pose q_r, wire joint order (rad; ball: xyzw); default neutral",
+            doc="rest pose q_r, wire joint order (rad; ball: xyzw); default the standing pose's",
         ),
         "trunk_stiffness": ParamSpec(30.0, minimum=0.0, maximum=1e6, doc="k_p of `trunk` (1/s²)"),
         "reference_trunk_orientation_xyzw": ParamSpec(
@@ -224,7 +224,8 @@ class PrioritizedController(Controller):
             kind="vector",
             minimum=-1.0,
             maximum=1.0,
-            doc="y_r of `trunk`: root orientation in world, scalar last",
+            doc="y_r of `trunk`: root orientation in world, scalar last; default the standing "
+            "pose's",
         ),
         "torque_selection": ParamSpec(
             None,

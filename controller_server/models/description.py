@@ -1000,8 +1000,7 @@ def _find_feet(model: pin.Model, data: pin.Data, bodies: Sequence[Body]) -> list
     heading = heading if np.linalg.norm(heading) > 1e-6 else np.array([1.0, 0.0, 0.0])
     lateral = np.array([-heading[1], heading[0], 0.0])
     sides = [
-        float((data.oMf[bodies[i].frame_id].translation - root.translation) @ lateral)
-        for i in feet
+        float((data.oMf[bodies[i].frame_id].translation - root.translation) @ lateral) for i in feet
     ]
     if len(feet) == 2 and sides[0] * sides[1] < 0:
         names = ["left_foot" if side > 0 else "right_foot" for side in sides]

@@ -321,3 +321,24 @@ def test_capsule_feet_stand_on_their_bottoms_and_shared_names_resolve_to_bodies(
     compiled = mujoco.MjModel.from_xml_string(CAPSULE_FEET)
     root = description.bodies[0]
     np.testing.assert_allclose(np.abs(root.collision_points).max(axis=0), compiled.geom_size[1])
+
+
+def test_a_turned_keyframe_keeps_the_feet_sides_and_sets_the_reference_orientations():
+    text = CAPSULE_FEET.replace(
+        "</worldbody>",
+        '</worldbody><keyframe><key name="turned" qpos="0 0 1 0.7071068 0 0 0.7071068 '
+        '-0.2 0.2 -0.2 0.2"/></keyframe>',
+    )
+    robot = load_robot_model(model_text=text, keyframe="turned")
+    np.testing.assert_allclose(
+        robot.standing_orientation_base_in_world_xyzw, [0, 0, np.sqrt(0.5), np.sqrt(0.5)]
+    )
+    assert [c.frame_name for c in robot.contacts] == ["left_shoe", "right_shoe"]
+    momentum = create_controller("momentum", robot).parameters()
+    prioritized = create_controller("prioritized", robot).parameters()
+    for orientation in (
+        momentum["reference_base_orientation_xyzw"],
+        prioritized["reference_trunk_orientation_xyzw"],
+    ):
+        np.testing.assert_allclose(orientation, robot.standing_orientation_base_in_world_xyzw)
+    np.testing.assert_allclose(momentum["reference_joint_position"], [-0.2, 0.2, -0.2, 0.2])
