@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from clients.client import ControllerClient, CurveKeys, ServerError, ServerTimeout
 from clients.layout import joint_slices
@@ -92,8 +93,14 @@ def physics_backend(
     return ReferenceBackend(model, **options)
 
 
-def standing_state(welcome: Welcome, joint_overrides: dict[str, list[float]]) -> RobotState:
+def standing_state(
+    welcome: Welcome, joint_overrides: dict[str, list[float]], model: pin.Model | None = None
+) -> RobotState:
     """The server's standing pose (with joint overrides), at rest.
+
+    With overrides and the robot's ``model`` (wire joint order), the base is
+    raised or lowered so the lowest contact point of ``welcome.contacts``
+    touches z = 0 again, as in the standing pose.
 
     Raises:
         ScenarioError: An override names a joint the robot lacks (the message
@@ -118,7 +125,19 @@ def standing_state(welcome: Welcome, joint_overrides: dict[str, list[float]]) ->
                 f"{joint.nq} number(s), e.g. {example}"
             )
         position[slices[name][0]] = value
-    return RobotState.standing(welcome, position)
+    state = RobotState.standing(welcome, position)
+    if joint_overrides and model is not None:
+        q = np.concatenate(
+            [state.position_base_in_world, state.orientation_base_in_world_xyzw, position]
+        )
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, pin.normalize(model, q))
+        state.position_base_in_world[2] -= min(
+            float(data.oMf[model.getFrameId(contact.frame)].act(np.array(point))[2])
+            for contact in welcome.contacts
+            for point in contact.points_in_frame or ()
+        )
+    return state
 
 
 @dataclass
@@ -259,7 +278,11 @@ def run_scenario(
             diagnostics_period_ticks=scenario.diagnostics_period_ticks,
             **imu_mount,
         )
-        backend.reset(standing_state(welcome, scenario.initial_joint_position))
+        backend.reset(
+            standing_state(
+                welcome, scenario.initial_joint_position, describe_model(scenario.model).model
+            )
+        )
         if imu is not None:
             imu.reset(backend.state(), backend.time_s)
         standing_height_m = welcome.standing_position_base_in_world[2]

@@ -183,3 +183,39 @@ def test_sparse_diagnostics_feed_metrics_and_plots(server, tmp_path):
     assert metrics["cop_strictly_inside_fraction"] > 0.9
     plot_run(record, tmp_path / "sparse.png")
     assert (tmp_path / "sparse.png").stat().st_size > 10_000
+
+
+def test_an_initial_crouch_keeps_the_soles_on_the_ground():
+    """``initial_joint_position`` bends the legs; the base comes down so the soles touch z = 0
+    (it once kept the straight pose's height, and the robot started 4 cm in the air)."""
+    import pinocchio as pin
+
+    from clients.sim.model_file import describe_model
+    from clients.sim.runner import standing_state
+    from controller_server.session import Session
+    from protocol.messages import Hello
+
+    welcome = Session(Hello(model="revolute_humanoid")).welcome(0)
+    model = describe_model("revolute_humanoid").model
+    crouch = {
+        f"{side}_{joint}": [angle]
+        for side in ("left", "right")
+        for joint, angle in (("hip_pitch", -0.3), ("knee", 0.6), ("ankle_pitch", -0.3))
+    }
+    state = standing_state(welcome, crouch, model)
+    q = np.concatenate(
+        [state.position_base_in_world, state.orientation_base_in_world_xyzw, state.joint_position]
+    )
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    heights = [
+        data.oMf[model.getFrameId(contact.frame)].act(np.array(point))[2]
+        for contact in welcome.contacts
+        for point in contact.points_in_frame
+    ]
+    assert min(heights) == pytest.approx(0.0, abs=1e-12)
+    assert welcome.standing_position_base_in_world[2] - state.position_base_in_world[2] > 0.03
+    # Without the model (the bridge's emulation), the pose keeps the standing base.
+    assert standing_state(welcome, crouch).position_base_in_world[2] == pytest.approx(
+        welcome.standing_position_base_in_world[2]
+    )
