@@ -426,6 +426,14 @@ class ReferenceBackend:
         pull are released and the system solved again; then each force is
         clamped to its friction cone. ``acceleration`` (``a_free`` on entry)
         gets ``M⁻¹ Jᵀ f`` added in place.
+
+        If every point would pull, the coupling is to blame: the stick dampers
+        ask a sliding foot for more tangential force than friction allows,
+        and through ``G`` that pulls the normals below zero (seen on a toe
+        edge sliding back at 0.3 m/s: the foot then sank with no force at
+        all). The normals are then solved alone, ``(I + Δt C_n G_nn) f_n =
+        f_s,n − C_n J_n (v + Δt a_free)``, and the tangential forces taken
+        explicitly, clamped to the cone.
         """
         model, data, step_s = self._model, self._data, self.timestep_s
         points = np.flatnonzero(self._touching)
@@ -456,6 +464,7 @@ class ReferenceBackend:
                 break
             keep[np.flatnonzero(keep)[pulling]] = False
         if not keep.any():
+            self._solve_normals_alone(points, jacobian, response, rhs, acceleration)
             return
         active = points[keep]
         self._limit_friction(active, forces)
@@ -463,6 +472,40 @@ class ReferenceBackend:
         if not keep.all():
             response = response[:, np.repeat(keep, 3)]
         acceleration += response @ forces.reshape(-1)
+
+    def _solve_normals_alone(
+        self,
+        points: np.ndarray,
+        jacobian: np.ndarray,
+        response: np.ndarray,
+        rhs: np.ndarray,
+        acceleration: np.ndarray,
+    ) -> None:
+        """The normal forces of ``points`` without the tangential coupling (see ``_solve_contact``).
+
+        ``jacobian``, ``response`` and ``rhs`` hold the rows of ``points`` (x, y, z each);
+        ``rhs`` is the coupled right-hand side, whose tangential rows are the explicit
+        tangential forces.
+        """
+        normal = np.arange(2, 3 * points.size, 3)
+        damping = self._damping_per_row[normal]
+        system = (self.timestep_s * damping)[:, None] * (jacobian[normal] @ response[:, normal])
+        system.flat[:: normal.size + 1] += 1.0
+        keep = np.ones(points.size, dtype=bool)
+        while keep.any():
+            forces_normal = np.linalg.solve(system[np.ix_(keep, keep)], rhs[normal][keep])
+            pulling = ~(forces_normal >= 0.0)  # NaN (a diverged state) releases too
+            if not pulling.any():
+                break
+            keep[np.flatnonzero(keep)[pulling]] = False
+        if not keep.any():
+            return
+        forces = rhs.reshape(-1, 3)[keep].copy()
+        forces[:, 2] = forces_normal
+        active = points[keep]
+        self._limit_friction(active, forces)
+        self._point_force[active] = forces
+        acceleration += response[:, np.repeat(keep, 3)] @ forces.reshape(-1)
 
     def _report_explicit_forces(self) -> None:
         """Forces with explicit dampers at the current state (what is reported after reset)."""

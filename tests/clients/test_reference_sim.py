@@ -320,6 +320,46 @@ def swing_chain(path: str, timestep_s: float) -> tuple[float, float, float]:
     return energy_drift, momentum_drift, rate_residual
 
 
+@pytest.mark.parametrize("pitch_rad", [-0.05, 0.05])
+def test_a_sliding_edge_that_sinks_is_pushed_back(pitch_rad):
+    """Feet on one edge, sliding back and sinking: the ground pushes (every edge, every way).
+
+    The toe edge (pitch +0.05) once got no force at all: the coupled implicit solve asked for
+    more stick than friction allows, which pulled every normal below zero, so every point
+    was released and the feet sank through the floor.
+    """
+    backend = ReferenceBackend("revolute_humanoid")
+    standing = backend.state()
+    turned = pin.Quaternion(pin.rpy.rpyToMatrix(0.0, pitch_rad, 0.0)).coeffs()
+    at_rest = RobotState(
+        standing.joint_position,
+        standing.joint_velocity,
+        standing.position_base_in_world,
+        turned,
+        np.zeros(3),
+        np.zeros(3),
+    )
+    backend.reset(at_rest)
+    lowest_m = backend.contact_point_positions_in_world()[:, 2].min()
+    sinking = RobotState(
+        standing.joint_position,
+        standing.joint_velocity,
+        standing.position_base_in_world - [0.0, 0.0, lowest_m + 0.003],  # edge 3 mm deep
+        turned,
+        np.array([-0.3, 0.0, -0.05]),
+        np.zeros(3),
+    )
+    backend.reset(sinking)
+    assert (backend.contact_point_positions_in_world()[:, 2] < 0).sum() == 4  # one edge a foot
+    backend.step(np.zeros(len(standing.joint_velocity)), [])
+    forces = backend.contact_point_forces_in_world()
+    touching = backend.contact_point_positions_in_world()[:, 2] < 0
+    assert (forces[touching, 2] > 0).all(), forces[touching]
+    tangential = np.linalg.norm(forces[:, :2], axis=1)
+    assert (tangential <= backend.friction_coefficient * forces[:, 2] + 1e-9).all()
+    assert forces[touching, 0].min() > 0  # friction opposes the backward slide
+
+
 def test_free_chain_conserves_energy_and_momentum_to_first_order(tmp_path):
     path = write_model(tmp_path, CHAIN_MJCF, "chain")
     energy_drift, momentum_drift, rate_residual = swing_chain(path, 1e-3)
