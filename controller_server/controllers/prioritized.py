@@ -54,6 +54,7 @@ from controller_server.balance_points import (
     ground_reference_points,
     shrink_polygon,
 )
+from controller_server.behaviors.jump import JUMP_PARAMETERS, Observation, StandingJump
 from controller_server.constraints import compute_support_equalities
 from controller_server.controllers.base import (
     CONTACT_PARAMETERS,
@@ -80,6 +81,7 @@ from controller_server.features import (
     compute_linear_momentum_objective,
     compute_posture_objectives,
 )
+from controller_server.features.point_from_com import compute_point_from_com_objective
 from controller_server.features.setpoint import (
     critical_damping,
     setpoint_acceleration,
@@ -122,6 +124,11 @@ OBJECTIVES: dict[str, tuple[int, float, str]] = {
     "trunk": (2, 1.0, "root (pelvis) orientation upright (cf. E_trunk of Table 2)"),
     "pose": (2, 1.0, "rest pose of the joints (§4, E_pose; Table 1: priority 3)"),
     "com_height": (3, 1.0, "CM height (Table 1, E_com⊥: priority 2)"),
+    "ankle": (
+        2,
+        0.0,
+        "each foot at its take-off offset from the CM in a jump's flight (E_ankle, §5)",
+    ),
     "torque": (3, 1.0, "minimum torque on `torque_selection` (eq. 15)"),
 }
 """Objective name → (default priority, default weight α, role).
@@ -194,6 +201,13 @@ class PrioritizedController(Controller):
         "com_height_stiffness": ParamSpec(
             20.0, minimum=0.0, maximum=1e6, doc="k_p of `com_height` (1/s²)"
         ),
+        "com_height_velocity": ParamSpec(
+            0.0,
+            minimum=-10.0,
+            maximum=10.0,
+            doc="ẏ_T of the target objective that reaches a new `com_height` (m/s; eq. 7), "
+            "held after T (a jump's take-off speed); 0: the height is held",
+        ),
         "com_height_duration_s": ParamSpec(
             0.5,
             minimum=0.0,
@@ -234,6 +248,15 @@ class PrioritizedController(Controller):
             maximum=1e6,
             doc="diagonal of S in eq. 15 per joint DoF, wire order; default all 0 (off)",
         ),
+        "ankle_stiffness": ParamSpec(100.0, minimum=0.0, maximum=1e6, doc="k_p of `ankle` (1/s²)"),
+        "behavior": ParamSpec(
+            "balance",
+            kind="choice",
+            choices=("balance", "jump"),
+            doc="`jump`: one standing (or twisting) jump, de Lasa §5 (the `jump_` parameters); "
+            "set it again to jump again; `balance` stops a jump and restores what it changed",
+        ),
+        **JUMP_PARAMETERS,
         "damping_ratio": ParamSpec(
             1.0, minimum=0.0, maximum=100.0, doc="ζ of every setpoint: k_v = 2 ζ √k_p (eq. 4)"
         ),
@@ -271,6 +294,7 @@ class PrioritizedController(Controller):
         self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._height_change_start_s: float | None = None  # state time a new height was set
         self._pending_height_change = False
+        self._jump: StandingJump | None = None
         super().__init__(robot, params)
 
     def default_value(self, key: str) -> Any:
@@ -284,12 +308,21 @@ class PrioritizedController(Controller):
         return super().default_value(key)
 
     def set_params(self, params: Mapping[str, Any]) -> None:
-        """Apply parameters; a new ``com_height`` starts a target objective (eq. 6–7)."""
+        """Apply parameters; a new ``com_height`` starts a target objective (eq. 6–7).
+
+        ``behavior = "jump"`` (again) arms one jump from the next tick; ``"balance"``
+        stops a jump under way and puts back what it changed.
+        """
         old_height = self._params.get("com_height")
         super().set_params(params)
         self._derived = {}
         if old_height is not None and self._params["com_height"] != old_height:
             self._pending_height_change = True
+        if "behavior" in params:
+            jump, self._jump = getattr(self, "_jump", None), None
+            if jump is not None and jump.state != "done":
+                super().set_params(jump.saved)
+                self._derived = {}
 
     def _validate(self, key: str, value: Any) -> Any:
         validated = super()._validate(key, value)
@@ -320,9 +353,11 @@ class PrioritizedController(Controller):
             raise ControllerFailed(f"a linear solve failed at this state: {error}") from error
 
     def _compute(self, control_input: ControlInput) -> ControlOutput:
-        p = self._params
         terms = compute_dynamics_terms(self.robot, self._data, control_input.q, control_input.v)
         check_finite_dynamics(terms)
+        if self._params["behavior"] == "jump":
+            self._step_jump(control_input, terms)
+        p = self._params
         flags = self.supports(control_input)
         layout = PrioritizedLayout(
             self._index,
@@ -400,6 +435,37 @@ class PrioritizedController(Controller):
             solution,
             control_input.want_diagnostics,
         )
+
+    def _step_jump(self, control_input: ControlInput, terms: DynamicsTerms) -> None:
+        """Advance the jump's state machine (§5) and apply what it sets at this tick."""
+        p = self._params
+        if self._jump is None:
+            self._jump = StandingJump(p, control_input.q[7:], self.default_value("com_height"))
+        observation = Observation(
+            time_s=control_input.time_s,
+            position_com_in_world=terms.position_com_in_world,
+            velocity_com_in_world=terms.momentum.linear_momentum / terms.total_mass,
+            angular_momentum=terms.momentum.angular_momentum,
+            touching=control_input.contact_flags,
+            position_contact_frames_in_world=terms.position_contact_frames_in_world,
+            joint_position=control_input.q[7:],
+            orientation_base_in_world_xyzw=control_input.q[3:7],
+            orientation_contact_frames_in_world=np.array(
+                [self._data.oMf[c.frame_id].rotation for c in self.robot.contacts]
+            ),
+            ground_height=p["ground_height"],
+        )
+        changes = self._jump.update(observation, p)
+        if changes:
+            super().set_params(changes)
+            self._derived = {}
+            if "com_height" in changes:
+                self._pending_height_change = True
+
+    @property
+    def behavior_state(self) -> str:
+        """``balance``, or the jump's state (``stand``, ``compress`` … ``done``)."""
+        return "balance" if self._jump is None else self._jump.state
 
     def _planted(self) -> tuple[bool, ...]:
         """Per contact, whether ``support_mask`` allows it (until the parameters change)."""
@@ -510,6 +576,28 @@ class PrioritizedController(Controller):
             p["weight_pose"],
         )
         on_acceleration += [pose, trunk]
+        jump = self._jump
+        if p["weight_ankle"] > 0 and jump is not None and jump.foot_rotations is not None:
+            stiffness = p["ankle_stiffness"]
+            on_acceleration.append(
+                compute_point_from_com_objective(
+                    [jacobian[:3] for jacobian in terms.support_jacobians],
+                    [drift[:3] for drift in terms.support_drifts],
+                    terms.position_contact_frames_in_world,
+                    v,
+                    momentum,
+                    mass,
+                    com,
+                    jump.ankle_offsets,
+                    stiffness,
+                    critical_damping(stiffness, ratio),
+                    p["weight_ankle"],
+                    rotations=[self._data.oMf[c.frame_id].rotation for c in self.robot.contacts],
+                    reference_rotations=jump.foot_rotations,
+                    angular_jacobians=[jacobian[3:] for jacobian in terms.support_jacobians],
+                    angular_drifts=[drift[3:] for drift in terms.support_drifts],
+                )
+            )
         objectives = {
             "dynamics": _Term(layout.equations_of_motion(terms), slice(0, layout.size), 1.0, True),
             **{
@@ -567,9 +655,17 @@ class PrioritizedController(Controller):
         if self._height_change_start_s is not None:
             remaining = p["com_height_duration_s"] - (time_s - self._height_change_start_s)
             if remaining > TARGET_HANDOVER_S:
-                return float(target_acceleration(com[2], com_velocity[2], target, 0.0, remaining))
+                return float(
+                    target_acceleration(
+                        com[2], com_velocity[2], target, p["com_height_velocity"], remaining
+                    )
+                )
             self._height_change_start_s = None
         stiffness = p["com_height_stiffness"]
+        if p["com_height_velocity"]:
+            # A target that ends in motion (a jump's thrust) holds that speed after T.
+            damping = critical_damping(stiffness, p["damping_ratio"])
+            return float(damping * (p["com_height_velocity"] - com_velocity[2]))
         return float(
             setpoint_acceleration(
                 target,

@@ -1,0 +1,335 @@
+"""Standing and twisting jumps (de Lasa, Mordatch & Hertzmann 2010, §5, Fig. 2).
+
+The state machine changes the balance controller's references, weights and
+priorities as the jump goes (every change goes through the parameters):
+
+* ``stand``: balance for ``jump_delay_s``. The pose the jump starts from is
+  the rest pose throughout: bent knees keep the CM height controllable (at
+  straight knees its Jacobian vanishes and nothing crouches).
+* ``compress``: a target objective (eq. 6–7) lowers the CM by
+  ``jump_crouch_depth`` over ``jump_compress_duration_s``. For the jump the
+  CM height objective ranks at ``jump_com_height_priority`` (default 3),
+  below the angular momentum, and the rest pose one level below it.
+  Ranked with the angular momentum (Table 1's level), the thrust traded
+  angular momentum for height and the robot left the ground pitching at
+  3 rad/s.
+* ``thrust``: a target objective raises the CM toward the standing pose's
+  height (legs straight) at ``jump_takeoff_speed`` (eq. 7's ẏ_T, held after
+  T), with vertical reference angular momentum ``jump_twist_angular_momentum``
+  for a twisting jump.
+* ``ascent`` once the CM, rising at half the take-off speed or more, is
+  within ``jump_takeoff_margin`` of that height, or no foot touches: no
+  contact is planned any more (``support_mask`` 0), the contact, CM, CM
+  height, trunk and angular momentum objectives are off, and the rest pose
+  becomes the take-off pose, held at ``jump_flight_pose_stiffness``: the
+  body leaves as one. Straightening the knees further made the thrust
+  saturate the torques and pitch the body; holding the trunk in the air took
+  limb motions as large as the gain bound allowed.
+* ``descent`` once the CM moves down.
+* ``impact`` at the first touch while descending (a touch while rising is
+  the take-off's scuffle; contact changes count after
+  :data:`CONTACT_CHANGE_S`), or :data:`TAKEOFF_TIMEOUT_S` into a take-off
+  that never left the ground: supports, contact, CM, trunk and angular
+  momentum objectives back (L_r = 0), the rest pose back to the starting
+  pose, the CM height held where it is.
+* ``recover`` once the CM moves up again (or after :data:`IMPACT_HOLD_S`): a
+  target objective brings the CM back to its starting height over
+  ``jump_recover_duration_s``.
+* ``done``: every weight, priority, gain and mask is back to its value
+  before the jump; the robot keeps standing in the pose it jumped from.
+
+E_ankle (``ankle``: the feet at their take-off offset from the CM, and
+flat) is on in flight at ``jump_ankle_weight``, 0 by default: on the
+thesis and revolute humanoids it turned the body in the air (the rigid
+take-off pose lands them better).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controller_server.controllers.base import ParamSpec
+
+__all__ = ["JUMP_PARAMETERS", "JUMP_STATES", "Observation", "StandingJump"]
+
+JUMP_STATES = ("stand", "compress", "thrust", "ascent", "descent", "impact", "recover", "done")
+IMPACT_HOLD_S = 0.3
+"""Longest ``impact``: then ``recover`` starts even if the CM is still moving down."""
+CONTACT_CHANGE_S = 0.01
+"""Take-off and touch-down count once the contact flags have said so this long (a sole
+bounces at the instant it leaves or meets the ground)."""
+TAKEOFF_TIMEOUT_S = 0.3
+"""A take-off whose feet have not left the ground this long lands where it is."""
+
+JUMP_PARAMETERS: dict[str, ParamSpec] = {
+    "jump_delay_s": ParamSpec(
+        0.3, minimum=0.0, maximum=60.0, doc="jump: balance this long before compressing (s)"
+    ),
+    "jump_crouch_depth": ParamSpec(
+        0.08, minimum=0.0, maximum=1.0, doc="jump: CM lowered by this much in `compress` (m)"
+    ),
+    "jump_compress_duration_s": ParamSpec(
+        0.4, minimum=0.05, maximum=10.0, doc="jump: T of the crouch's target objective (s)"
+    ),
+    "jump_takeoff_speed": ParamSpec(
+        1.6,
+        minimum=0.0,
+        maximum=10.0,
+        doc="jump: upward CM speed `thrust` asks for at the standing pose's height (m/s)",
+    ),
+    "jump_thrust_duration_s": ParamSpec(
+        0.25, minimum=0.05, maximum=10.0, doc="jump: T of the thrust's target objective (s)"
+    ),
+    "jump_takeoff_margin": ParamSpec(
+        0.08,
+        minimum=0.0,
+        maximum=1.0,
+        doc="jump: take-off (`ascent`) this far below the standing pose's CM height, "
+        "before the knees straighten (m)",
+    ),
+    "jump_twist_angular_momentum": ParamSpec(
+        0.0,
+        minimum=-1e3,
+        maximum=1e3,
+        doc="jump: vertical L_r during `thrust` (kg·m²/s); non-zero twists the jump",
+    ),
+    "jump_com_height_priority": ParamSpec(
+        3,
+        kind="int",
+        minimum=1,
+        maximum=9,
+        doc="jump: priority of `com_height` during the jump (the rest pose one below it)",
+    ),
+    "jump_com_height_weight": ParamSpec(
+        10.0, minimum=0.0, maximum=1e6, doc="jump: α of `com_height` during the jump"
+    ),
+    "jump_flight_pose_stiffness": ParamSpec(
+        200.0,
+        minimum=0.0,
+        maximum=1e6,
+        doc="jump: k_p of `pose` in flight, holding the take-off pose (1/s²)",
+    ),
+    "jump_ankle_weight": ParamSpec(
+        0.0, minimum=0.0, maximum=1e6, doc="jump: α of `ankle` (E_ankle) in flight; 0 = off"
+    ),
+    "jump_recover_duration_s": ParamSpec(
+        0.6, minimum=0.05, maximum=10.0, doc="jump: T of the return to standing height (s)"
+    ),
+}
+"""The jump's parameters (``set_params``), documented in docs/controllers.md."""
+
+_CHANGED = (
+    "reference_joint_position",
+    "com_height",
+    "com_height_velocity",
+    "com_height_duration_s",
+    "priority_com_height",
+    "priority_pose",
+    "weight_com_height",
+    "weight_contact",
+    "weight_com",
+    "weight_ankle",
+    "weight_trunk",
+    "weight_angular_momentum",
+    "reference_angular_momentum",
+    "support_mask",
+    "pose_stiffness",
+)
+"""Every parameter the jump sets; ``done`` puts them back (but the rest pose and the CM
+height, which stay those of the pose it jumped from)."""
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What a behaviour sees of one tick.
+
+    Attributes:
+        time_s: Client time (s).
+        position_com_in_world: CM (m).
+        velocity_com_in_world: CM velocity (m/s).
+        angular_momentum: About the CM, world axes (kg·m²/s).
+        touching: Per contact, its flag from the client.
+        position_contact_frames_in_world: ``(contacts, 3)`` contact frame origins (m).
+        orientation_contact_frames_in_world: ``(contacts, 3, 3)`` their rotations.
+        joint_position: Joint positions, wire order (ball joints: xyzw).
+        orientation_base_in_world_xyzw: Root orientation, scalar last.
+        ground_height: Ground plane height (m).
+    """
+
+    time_s: float
+    position_com_in_world: np.ndarray
+    velocity_com_in_world: np.ndarray
+    angular_momentum: np.ndarray
+    touching: tuple[bool, ...]
+    position_contact_frames_in_world: np.ndarray
+    orientation_contact_frames_in_world: np.ndarray
+    joint_position: np.ndarray
+    orientation_base_in_world_xyzw: np.ndarray
+    ground_height: float
+
+
+class StandingJump:
+    """One standing (or twisting) jump, from ``stand`` to ``done`` (see the module docstring).
+
+    Args:
+        params: The controller's parameters when the jump starts (restored at ``done``).
+        joint_position: The pose it jumps from (wire order): the rest pose
+            from then on. Its CM height, at the first tick, is the height the
+            landing recovers.
+        standing_com_height: The robot's standing pose's CM height above the
+            ground (m): legs straight, where the thrust aims.
+
+    Attributes:
+        state: The current state (:data:`JUMP_STATES`).
+        ankle_offsets: ``(contacts, 3)`` each foot's offset from the CM that
+            ``ankle`` holds in flight (``None`` before take-off).
+    """
+
+    def __init__(
+        self, params: Mapping[str, Any], joint_position: np.ndarray, standing_com_height: float
+    ):
+        self.saved = {key: _copy(params[key]) for key in _CHANGED}
+        """The parameters the jump changes, as they were: ``done`` puts them back."""
+        self._standing = np.nan  # the CM height it jumps from, set at the first tick
+        self._reach = float(standing_com_height)
+        self.state = "stand"
+        self._rest_pose = [float(x) for x in joint_position]
+        self._since_s: float | None = None
+        self.ankle_offsets: np.ndarray | None = None
+        self.foot_rotations: np.ndarray | None = None
+        self._airborne = False
+        self._left_ground = False
+        self._thrust_end_s = np.inf  # when ascent began
+        self._flags_since_s = -np.inf  # when the flags last went from some to none or back
+
+    def update(self, observation: Observation, params: Mapping[str, Any]) -> dict[str, Any]:
+        """The parameters to set at this tick (empty when the state does not change)."""
+        o, p = observation, params
+        if self._since_s is None:
+            self._since_s = o.time_s
+        elapsed = o.time_s - self._since_s
+        height = o.position_com_in_world[2] - o.ground_height
+        rising = o.velocity_com_in_world[2] > 0.0
+        if self._airborne == any(o.touching):
+            self._airborne = not self._airborne
+            self._flags_since_s = o.time_s
+        settled = o.time_s - self._flags_since_s >= CONTACT_CHANGE_S
+        airborne, grounded = self._airborne and settled, not self._airborne and settled
+        if self.state == "stand" and elapsed == 0.0:
+            self._standing = float(height)
+            # The pose it jumps from is the rest pose: bent knees keep the CM height
+            # controllable (at straight knees its Jacobian vanishes).
+            return {"reference_joint_position": self._rest_pose}
+        if self.state == "stand" and elapsed >= p["jump_delay_s"]:
+            return self._enter(
+                o,
+                "compress",
+                com_height=self._standing - p["jump_crouch_depth"],
+                com_height_duration_s=p["jump_compress_duration_s"],
+                priority_com_height=p["jump_com_height_priority"],
+                priority_pose=p["jump_com_height_priority"] + 1,
+                weight_com_height=p["jump_com_height_weight"],
+            )
+        if self.state == "compress" and elapsed >= p["jump_compress_duration_s"]:
+            return self._enter(
+                o,
+                "thrust",
+                com_height=self._reach,
+                com_height_velocity=p["jump_takeoff_speed"],
+                com_height_duration_s=p["jump_thrust_duration_s"],
+                reference_angular_momentum=[0.0, 0.0, p["jump_twist_angular_momentum"]],
+            )
+        takeoff_height = self._reach - p["jump_takeoff_margin"]
+        launched = o.velocity_com_in_world[2] >= 0.5 * p["jump_takeoff_speed"]
+        if self.state == "thrust" and (airborne or (launched and height >= takeoff_height)):
+            # The feet keep the orientation they stand in (flat) from now to touch-down.
+            self.foot_rotations = o.orientation_contact_frames_in_world.copy()
+            self._thrust_end_s = o.time_s
+            return self._enter(
+                o,
+                "ascent",
+                weight_contact=0.0,
+                weight_com=0.0,
+                weight_com_height=0.0,
+                com_height_velocity=0.0,
+                weight_trunk=0.0,
+                weight_angular_momentum=0.0,
+                priority_pose=self.saved["priority_pose"],
+                pose_stiffness=p["jump_flight_pose_stiffness"],
+                weight_ankle=p["jump_ankle_weight"],
+                support_mask=[0.0] * len(o.touching),
+                # The legs keep the pose they leave in: the crouch would tuck them while
+                # the feet still push (measured: the torques saturated).
+                reference_joint_position=[float(x) for x in o.joint_position],
+            )
+        if self.state == "ascent" and not rising:
+            self._enter(o, "descent")
+        if self.state in ("ascent", "descent") and airborne and not self._left_ground:
+            # In the air: the ankles keep the offset from the CM they left the ground with
+            # (held while the feet still touch, it pushed the feet into the ground).
+            self._left_ground = True
+            self.ankle_offsets = o.position_contact_frames_in_world - o.position_com_in_world
+        thrust_failed = self.state == "thrust" and elapsed >= (
+            p["jump_thrust_duration_s"] + TAKEOFF_TIMEOUT_S
+        )
+        never_left = (
+            self.state in ("ascent", "descent")
+            and not self._left_ground
+            and o.time_s - self._thrust_end_s >= TAKEOFF_TIMEOUT_S
+        )
+        # A touch while the CM still rises is the take-off's scuffle, not the landing.
+        landed = self.state == "descent" and self._left_ground and grounded
+        if thrust_failed or never_left or landed:
+            return self._enter(
+                o,
+                "impact",
+                weight_contact=self.saved["weight_contact"],
+                weight_com=self.saved["weight_com"],
+                weight_com_height=p["jump_com_height_weight"],
+                weight_ankle=0.0,
+                weight_trunk=self.saved["weight_trunk"],
+                support_mask=self.saved["support_mask"],
+                priority_pose=p["jump_com_height_priority"] + 1,
+                pose_stiffness=self.saved["pose_stiffness"],
+                reference_joint_position=self._rest_pose,
+                weight_angular_momentum=self.saved["weight_angular_momentum"],
+                com_height=float(height),
+                com_height_duration_s=p["jump_recover_duration_s"],
+                reference_angular_momentum=[0.0, 0.0, 0.0],
+                # Upright, facing where it landed (a twisting jump turned it).
+                reference_trunk_orientation_xyzw=_heading(o.orientation_base_in_world_xyzw),
+            )
+        if self.state == "impact" and (rising or elapsed >= IMPACT_HOLD_S):
+            return self._enter(
+                o,
+                "recover",
+                com_height=self._standing,
+                com_height_duration_s=p["jump_recover_duration_s"],
+            )
+        if self.state == "recover" and elapsed >= p["jump_recover_duration_s"]:
+            self.ankle_offsets = self.foot_rotations = None
+            # It stands where it jumped from: that pose and CM height stay the references.
+            restored = dict(self.saved, reference_joint_position=self._rest_pose)
+            restored["com_height"] = self._standing
+            return self._enter(o, "done", **restored)
+        return {}
+
+    def _enter(self, observation: Observation, state: str, **changes: Any) -> dict[str, Any]:
+        self.state = state
+        self._since_s = observation.time_s
+        return changes
+
+
+def _heading(orientation_xyzw: np.ndarray) -> list[float]:
+    """The yaw-only quaternion ``[0, 0, sin(ψ/2), cos(ψ/2)]`` of an orientation's heading."""
+    x, y, z, w = orientation_xyzw
+    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return [0.0, 0.0, float(np.sin(yaw / 2.0)), float(np.cos(yaw / 2.0))]
+
+
+def _copy(value: Any) -> Any:
+    return [float(x) for x in value] if isinstance(value, np.ndarray) else value
