@@ -151,7 +151,6 @@ class Observation:
         time_s: Client time (s).
         position_com_in_world: CM (m).
         velocity_com_in_world: CM velocity (m/s).
-        angular_momentum: About the CM, world axes (kg·m²/s).
         touching: Per contact, its flag from the client.
         position_contact_frames_in_world: ``(contacts, 3)`` contact frame origins (m).
         orientation_contact_frames_in_world: ``(contacts, 3, 3)`` their rotations.
@@ -163,7 +162,6 @@ class Observation:
     time_s: float
     position_com_in_world: np.ndarray
     velocity_com_in_world: np.ndarray
-    angular_momentum: np.ndarray
     touching: tuple[bool, ...]
     position_contact_frames_in_world: np.ndarray
     orientation_contact_frames_in_world: np.ndarray

@@ -319,7 +319,7 @@ class PrioritizedController(Controller):
         if old_height is not None and self._params["com_height"] != old_height:
             self._pending_height_change = True
         if "behavior" in params:
-            jump, self._jump = getattr(self, "_jump", None), None
+            jump, self._jump = self._jump, None
             if jump is not None and jump.state != "done":
                 super().set_params(jump.saved)
                 self._derived = {}
@@ -445,7 +445,6 @@ class PrioritizedController(Controller):
             time_s=control_input.time_s,
             position_com_in_world=terms.position_com_in_world,
             velocity_com_in_world=terms.momentum.linear_momentum / terms.total_mass,
-            angular_momentum=terms.momentum.angular_momentum,
             touching=control_input.contact_flags,
             position_contact_frames_in_world=terms.position_contact_frames_in_world,
             joint_position=control_input.q[7:],
