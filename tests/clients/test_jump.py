@@ -1,7 +1,8 @@
 """The standing jump (issue 19, de Lasa §5) in the reference simulator, through a real server.
 
 Judged on the physics: the soles leave the floor for a while, the robot lands on them
-without falling, and it ends standing where it crouched from.
+without falling, and it ends standing where it crouched from. Known gap (README, "Jumping"):
+the arms swing past the shoulders' limit in the crouch, which this simulator does not stop.
 """
 
 import numpy as np
