@@ -34,6 +34,7 @@ __all__ = [
     "contact_points",
     "describe_model",
     "hello_model",
+    "local_reader",
     "model_format",
     "resolve_model_path",
 ]
@@ -84,7 +85,7 @@ def model_format(path: Path) -> str:
     return "urdf" if path.suffix.lower() == ".urdf" else "mjcf"
 
 
-def _local_reader(path: Path) -> FileReader:
+def local_reader(path: Path) -> FileReader:
     """Reads the files a model names, relative to its directory."""
     return lambda relative: (path.parent / relative).read_bytes()
 
@@ -115,7 +116,7 @@ def _describe(
     return describe(
         path.read_bytes(),
         model_format(path),
-        read=_local_reader(path),
+        read=local_reader(path),
         name=path.stem,
         contacts=contacts,
         keyframe=keyframe,
@@ -137,7 +138,7 @@ def hello_model(model: str) -> dict[str, Any]:
         return {"model": model}
     text = path.read_bytes()
     fields: dict[str, Any] = {"model_text": text.decode(), "model_format": model_format(path)}
-    assets = gather_files(text, model_format(path), _local_reader(path))
+    assets = gather_files(text, model_format(path), local_reader(path))
     if assets:
         fields["model_assets"] = assets
     return fields

@@ -74,6 +74,7 @@ from clients.sim.errors import SimulationDiverged, UnsupportedModel
 from clients.sim.model_file import (
     DescriptionError,
     describe_model,
+    local_reader,
     model_format,
     resolve_model_path,
 )
@@ -145,8 +146,7 @@ def _mujoco_spec(path: Path) -> mujoco.MjSpec:
     (``fusestatic="false"``: the root link would otherwise be fused into the
     world) and meshes found by file name, as MuJoCo's importer looks them up.
     """
-    text = path.read_bytes()
-    read = lambda relative: (path.parent / relative).read_bytes()  # noqa: E731
+    text, read = path.read_bytes(), local_reader(path)
     if model_format(path) == "mjcf":
         return compile_mjcf(text, read)[0]
     assets = {

@@ -279,15 +279,6 @@ class FoundContact:
     points_in_frame: np.ndarray
     friction_coefficient: float = 0.8
 
-    def to_spec(self) -> ContactSpec:
-        """The wire description of this contact."""
-        return ContactSpec(
-            name=self.name,
-            frame=self.frame,
-            points_in_frame=[tuple(float(c) for c in p) for p in self.points_in_frame],
-            friction_coefficient=self.friction_coefficient,
-        )
-
 
 @dataclass(frozen=True)
 class Body:

@@ -378,14 +378,16 @@ def _load_uncached(
     model = description.model
     torque_limit = description.torque_limit
     model.effortLimit[6:] = torque_limit
-    specs = [c.to_spec() for c in description.contacts]
+    contacts = tuple(_resolve(c, model) for c in description.contacts)
     joints = _joint_infos(model, torque_limit)
     return RobotModel(
         name=name,
         model=model,
-        model_hash=_hash(text, dict(files), _contacts_json(specs), keyframe),
+        model_hash=_hash(
+            text, dict(files), _contacts_json([c.to_spec() for c in contacts]), keyframe
+        ),
         joints=joints,
-        contacts=tuple(_resolve(c, model) for c in description.contacts),
+        contacts=contacts,
         torque_limit=torque_limit,
         standing_configuration=description.standing_configuration,
         ball_swing_limit={
