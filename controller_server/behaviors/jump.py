@@ -129,6 +129,7 @@ _CHANGED = (
     "com_height_duration_s",
     "priority_com_height",
     "priority_pose",
+    "priority_trunk",
     "weight_com_height",
     "weight_contact",
     "weight_com",
@@ -230,6 +231,7 @@ class StandingJump:
                 com_height_duration_s=p["jump_compress_duration_s"],
                 priority_com_height=p["jump_com_height_priority"],
                 priority_pose=p["jump_com_height_priority"] + 1,
+                priority_trunk=p["jump_com_height_priority"] + 1,
                 weight_com_height=p["jump_com_height_weight"],
             )
         if self.state == "compress" and elapsed >= p["jump_compress_duration_s"]:
@@ -292,6 +294,7 @@ class StandingJump:
                 weight_trunk=self.saved["weight_trunk"],
                 support_mask=self.saved["support_mask"],
                 priority_pose=p["jump_com_height_priority"] + 1,
+                priority_trunk=p["jump_com_height_priority"] + 1,
                 pose_stiffness=self.saved["pose_stiffness"],
                 reference_joint_position=self._rest_pose,
                 weight_angular_momentum=self.saved["weight_angular_momentum"],

@@ -29,8 +29,9 @@ Priorities and weights (eq. 37) of every objective, and its gains and
 references, change at run time through ``set_params``. Inequalities
 ``D x + f ≥ 0``: ``λ ≥ 0`` (eq. 25), non-penetration ``Vᵀ(J_c q̈ + J̇_c q̇) ≥ 0``
 (eq. 26, flat static ground so ``V̇ = 0``), torque limits, and joints at a
-limit may not accelerate further out (eq. 27, see
-:func:`~controller_server.controllers.prioritized_layout.joint_limit_rows`).
+limit may not accelerate further out (eq. 27), made velocity-aware: no 1-DoF
+joint may reach past a limit within ``joint_limit_horizon_s`` (see
+:meth:`~controller_server.controllers.prioritized_layout.LayoutIndex.joint_limit_bounds`).
 
 Every objective on ``q̈`` is a feature of :mod:`controller_server.features`,
 shared with the weighted controller; the layout
@@ -67,6 +68,7 @@ from controller_server.controllers.base import (
     normalized_configuration_part,
 )
 from controller_server.controllers.prioritized_layout import (
+    DEFAULT_LIMIT_HORIZON_S,
     NUM_ROOT_DOFS,
     LayoutIndex,
     PrioritizedLayout,
@@ -271,6 +273,13 @@ class PrioritizedController(Controller):
             doc="sole points of a contact `support_mask` allows carry force when this close "
             "to the ground, whatever the contact flags (m)",
         ),
+        "joint_limit_horizon_s": ParamSpec(
+            DEFAULT_LIMIT_HORIZON_S,
+            minimum=0.005,
+            maximum=10.0,
+            doc="T of the joint-limit inequalities: no 1-DoF joint may reach past a limit "
+            "within T at its planned acceleration (eq. 27, velocity-aware) (s)",
+        ),
         "gain_bound": ParamSpec(
             1e4,
             minimum=10.0,
@@ -369,7 +378,9 @@ class PrioritizedController(Controller):
             p["contact_distance"],
         )
         objectives, desired_rates = self._objectives(control_input, terms, layout)
-        D, f = layout.inequalities(control_input.q, p["non_penetration"])
+        D, f = layout.inequalities(
+            control_input.q, control_input.v, p["non_penetration"], p["joint_limit_horizon_s"]
+        )
         # One sum first: NaN and ±inf propagate through it; only a non-finite (or overflowing)
         # sum looks at each array.
         total = float(D.sum()) + float(f.sum())

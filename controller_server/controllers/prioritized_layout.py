@@ -29,10 +29,16 @@ __all__ = [
     "LayoutIndex",
     "PrioritizedLayout",
     "friction_cone_basis",
-    "joint_limit_rows",
 ]
 
 NUM_ROOT_DOFS = 6
+LIMIT_ACCELERATION_ACTIVE = 100.0
+"""A joint-limit row enters once its acceleration bound is below this (rad/s² or m/s²)."""
+LIMIT_ACCELERATION_CAP = 1000.0
+"""Largest acceleration a joint-limit row demands, back from a limit overshot or
+run into fast (rad/s² or m/s²): more would ask the equations of motion the impossible."""
+DEFAULT_LIMIT_HORIZON_S = 0.1
+"""T of :meth:`LayoutIndex.joint_limit_bounds` when none is given."""
 
 
 def friction_cone_basis(friction_coefficient: float) -> np.ndarray:
@@ -105,15 +111,39 @@ class LayoutIndex:
             self._friction = (coefficients, (mus, cones))
         return self._friction[1]
 
-    def joint_limit_signs(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Velocity indices of the 1-DoF joints at or past a limit, and ``+1`` (lower) or ``−1``.
+    def joint_limit_bounds(
+        self, q: np.ndarray, v: np.ndarray, horizon_s: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The 1-DoF joints whose limit may bind this tick, with ``s q̈_i + f_i ≥ 0`` for each.
 
-        In joint order; see :func:`joint_limit_rows`.
+        A joint may not reach past its limit within ``horizon_s`` (T) at constant
+        acceleration: ``q + q̇ T + ½ q̈ T² ≤ q_max`` (and ``≥ q_min``), i.e. for the upper
+        limit ``−q̈ + 2 (q_max − q − q̇ T) / T² ≥ 0``. Held every tick, a joint running into
+        its limit follows ``ë + (2/T) ė + (2/T²) e = 0`` (ζ = 1/√2), and one past it is
+        pulled back. de Lasa's eq. 27 keeps only a joint *at* its limit from accelerating
+        further out, and the velocity it arrives with carries it past (a jump's arms swung
+        0.9 rad past the shoulders'). The demand is at most :data:`LIMIT_ACCELERATION_CAP`
+        either way; rows whose bound exceeds :data:`LIMIT_ACCELERATION_ACTIVE` are left out.
+
+        Returns:
+            Velocity indices (joint order), signs (``+1`` lower limit, ``−1`` upper) and
+            offsets ``f`` (rad/s² or m/s²).
         """
         values = q[self._limit_q]
-        sign = np.where(values <= self._lower, 1.0, np.where(values >= self._upper, -1.0, 0.0))
-        at_limit = np.flatnonzero(sign)
-        return self._limit_v[at_limit], sign[at_limit]
+        velocities = v[self._limit_v]
+        predicted = values + velocities * horizon_s
+        scale = 2.0 / (horizon_s * horizon_s)
+        with np.errstate(invalid="ignore"):  # unlimited joints: ±inf bounds
+            upper_room = np.minimum(scale * (self._upper - predicted), LIMIT_ACCELERATION_CAP)
+            lower_room = np.minimum(scale * (predicted - self._lower), LIMIT_ACCELERATION_CAP)
+        upper_room = np.maximum(upper_room, -LIMIT_ACCELERATION_CAP)
+        lower_room = np.maximum(lower_room, -LIMIT_ACCELERATION_CAP)
+        upper = np.flatnonzero(upper_room < LIMIT_ACCELERATION_ACTIVE)
+        lower = np.flatnonzero(lower_room < LIMIT_ACCELERATION_ACTIVE)
+        joints = np.concatenate([lower, upper])
+        signs = np.concatenate([np.ones(lower.size), -np.ones(upper.size)])
+        offsets = np.concatenate([lower_room[lower], upper_room[upper]])
+        return self._limit_v[joints], signs, offsets
 
 
 class PrioritizedLayout:
@@ -275,16 +305,23 @@ class PrioritizedLayout:
             np.full(selection.size, weight) * (selection > 0),
         )
 
-    def inequalities(self, q: np.ndarray, non_penetration: bool) -> tuple[np.ndarray, np.ndarray]:
+    def inequalities(
+        self,
+        q: np.ndarray,
+        v: np.ndarray,
+        non_penetration: bool,
+        limit_horizon_s: float = DEFAULT_LIMIT_HORIZON_S,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Rows of ``D x + f ≥ 0``: λ ≥ 0, non-penetration, torque and joint limits.
 
         In this order: ``λ ≥ 0`` (eq. 25); ``Vᵀ (J_c q̈ + J̇_c q̇) ≥ 0`` (eq. 26);
-        ``−τ_max ≤ τ ≤ τ_max`` (§7.2) on the bounded joints, lower then upper; the joints
-        at a limit (eq. 27, :func:`joint_limit_rows`).
+        ``−τ_max ≤ τ ≤ τ_max`` (§7.2) on the bounded joints, lower then upper; the 1-DoF
+        joints that would pass a limit within ``limit_horizon_s`` (eq. 27, made
+        velocity-aware: :meth:`LayoutIndex.joint_limit_bounds`).
         """
         index, nu, nl = self.index, self.nu, self.nl
         bounded = index.bounded_torques
-        limit_v, limit_sign = index.joint_limit_signs(q)
+        limit_v, limit_sign, limit_offset = index.joint_limit_bounds(q, v, limit_horizon_s)
         penetration = nl if nl and non_penetration else 0
         rows = nl + penetration + 2 * bounded.size + limit_v.size
         D = np.zeros((rows, self.size))
@@ -303,6 +340,7 @@ class PrioritizedLayout:
             f[start + count : start + 2 * count] = index.torque_limit[bounded]
             start += 2 * count
         D[start + np.arange(limit_v.size), nu + limit_v] = limit_sign
+        f[start:] = limit_offset
         return D, f
 
 
@@ -361,20 +399,3 @@ def _sole_row_basis(positions: np.ndarray, counts: list[int]) -> np.ndarray | No
         block[:, 6 * sole : 6 * sole + 3] = translations
         block[:, 6 * sole + 3 : 6 * sole + 6] = rotations[sole]
     return basis
-
-
-def joint_limit_rows(
-    robot: RobotModel, q: np.ndarray, size: int, nu: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """``±q̈_i ≥ 0`` for 1-DoF joints at or past a limit (de Lasa eq. 27).
-
-    The paper adds a limit "contact" force ``λ_lim`` per such joint; our
-    simulators model no joint stop that would supply it, so only its
-    non-penetration half is kept: a joint at its lower limit may not
-    accelerate further down, at its upper limit not further up. Ball joints
-    have no scalar range and are left to the rest pose.
-    """
-    indices, signs = LayoutIndex(robot).joint_limit_signs(q)
-    rows = np.zeros((indices.size, size))
-    rows[np.arange(indices.size), nu + indices] = signs
-    return rows, np.zeros(indices.size)

@@ -360,6 +360,48 @@ def test_a_sliding_edge_that_sinks_is_pushed_back(pitch_rad):
     assert forces[touching, 0].min() > 0  # friction opposes the backward slide
 
 
+def test_a_foot_twisting_on_the_ground_slides_with_coulomb_friction_and_does_not_sink():
+    """A robot spinning on its soles (a twisting jump's thrust): friction within its cone
+    brakes the spin, the ground holds the weight without hopping, and no sole sinks.
+
+    The forces were once clamped to the cone after a stick solve; the normals that solve
+    implied for the impossible stick forces pulled: here the weight carried swung between
+    0.25 and 2.4 m g, and in a twisting jump the soles sank 2.5 cm with no force.
+    """
+    backend = ReferenceBackend("thesis_humanoid")
+    model = backend.pinocchio_model
+    data = model.createData()
+    standing = backend.state()
+    stiffness, damping = locking_gains(backend)
+    q_lock = backend.configuration.copy()
+    backend.reset(
+        RobotState(
+            standing.joint_position,
+            standing.joint_velocity,
+            standing.position_base_in_world,
+            standing.orientation_base_in_world_xyzw,
+            np.zeros(3),
+            np.array([0.0, 0.0, 8.0]),  # yaw, rad/s
+        )
+    )
+    weight_N = backend.total_mass_kg * 9.81
+    lowest_m = 0.0
+    for step in range(60):
+        backend.step(locking_torque(backend, q_lock, stiffness, damping), [])
+        forces = backend.contact_point_forces_in_world()
+        positions = backend.contact_point_positions_in_world()
+        lowest_m = min(lowest_m, positions[:, 2].min())
+        tangential = np.linalg.norm(forces[:, :2], axis=1)
+        assert (tangential <= backend.friction_coefficient * forces[:, 2] * (1 + 1e-9)).all()
+        # Friction's moment about the CM's vertical opposes the spin.
+        arms = positions[:, :2] - pin.centerOfMass(model, data, backend.configuration)[:2]
+        assert np.sum(arms[:, 0] * forces[:, 1] - arms[:, 1] * forces[:, 0]) < 0.0
+        if step >= 5:  # no hopping: the clamped stick solve's normals swung 160–1500 N
+            assert 0.5 * weight_N < forces[:, 2].sum() < 1.6 * weight_N
+    assert lowest_m > -0.003  # standing sinks 0.4 mm
+    assert backend.state().angular_velocity_base_in_base[2] < 8.0  # friction slows the spin
+
+
 def test_free_chain_conserves_energy_and_momentum_to_first_order(tmp_path):
     path = write_model(tmp_path, CHAIN_MJCF, "chain")
     energy_drift, momentum_drift, rate_residual = swing_chain(path, 1e-3)

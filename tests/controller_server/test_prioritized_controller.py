@@ -11,9 +11,9 @@ from hypothesis import strategies as st
 from controller_server.controllers import ControlInput, create_controller
 from controller_server.controllers.prioritized import friction_cone_basis
 from controller_server.controllers.prioritized_layout import (
+    LIMIT_ACCELERATION_ACTIVE,
     LayoutIndex,
     PrioritizedLayout,
-    joint_limit_rows,
 )
 from controller_server.dynamics import compute_dynamics_terms
 from controller_server.errors import InvalidParams
@@ -300,32 +300,55 @@ def test_motionless_forces_move_nothing(robot):
     np.testing.assert_allclose(dynamics @ basis, 0.0, atol=1e-10 * np.abs(dynamics).max())
 
 
-def test_joint_limit_rows_are_the_joints_at_their_limits(robot):
-    """Vectorized rows against the definition, joint by joint (de Lasa eq. 27); ball joints
-    (all of the thesis humanoid's and the dino's) have none."""
+def test_joint_limit_rows_bound_the_position_reached_within_the_horizon(robot):
+    """Vectorized rows against the definition, joint by joint: ``q + q̇ T + ½ q̈ T² ≤ q_max``
+    (and ``≥ q_min``) for every ``q̈`` the rows allow, with the rows of joints that cannot
+    bind left out (eq. 27, velocity-aware); ball joints (all of the thesis humanoid's and the
+    dino's) have none."""
     model = robot.model
     rng = np.random.default_rng(1)
     q = pin.neutral(model)
+    v = np.zeros(model.nv)
+    horizon = 0.1
     scalar = [joint for joint in model.joints[2:] if joint.nq == 1]
-    for joint in scalar:  # a third below, a third above, a third inside
+    for joint in scalar:  # below, above, near and inside, moving either way
         lower, upper = (
             model.lowerPositionLimit[joint.idx_q],
             model.upperPositionLimit[joint.idx_q],
         )
-        q[joint.idx_q] = rng.choice([lower - 0.1, upper + 0.1, 0.5 * (lower + upper)])
+        q[joint.idx_q] = rng.choice(
+            [lower - 0.1, upper + 0.1, lower + 0.05, upper - 0.05, 0.5 * (lower + upper)]
+        )
+        v[joint.idx_v] = rng.choice([-2.0, 0.0, 2.0])
     nu = model.nv - 6
-    rows, offsets = joint_limit_rows(robot, q, 2 * model.nv, nu)
-    expected = []
+    index = LayoutIndex(robot)
+    columns, signs, offsets = index.joint_limit_bounds(q, v, horizon)
+    rows = {(int(c), float(s)): float(f) for c, s, f in zip(columns, signs, offsets, strict=True)}
+    assert len(rows) == columns.size
+    expected = 0
     for joint in scalar:
-        value = q[joint.idx_q]
-        if value <= model.lowerPositionLimit[joint.idx_q]:
-            expected.append((nu + joint.idx_v, 1.0))
-        elif value >= model.upperPositionLimit[joint.idx_q]:
-            expected.append((nu + joint.idx_v, -1.0))
+        value, velocity = q[joint.idx_q], v[joint.idx_v]
+        predicted = value + velocity * horizon
+        for sign, limit in (
+            (1.0, model.lowerPositionLimit[joint.idx_q]),
+            (-1.0, model.upperPositionLimit[joint.idx_q]),
+        ):
+            # The acceleration that reaches the limit exactly at T, as `sign · q̈ ≥ −room`.
+            room = sign * (predicted - limit) * 2.0 / horizon**2
+            key = (joint.idx_v, sign)
+            if room >= LIMIT_ACCELERATION_ACTIVE:
+                assert key not in rows
+                continue
+            expected += 1
+            assert rows[key] == pytest.approx(np.clip(room, -1000.0, 1000.0), rel=1e-12)
+            # At the bound's acceleration the joint arrives at the limit at T (uncapped rows).
+            if abs(room) < 1000.0:
+                acceleration = -sign * rows[key]
+                reached = value + velocity * horizon + 0.5 * acceleration * horizon**2
+                assert reached == pytest.approx(limit, abs=1e-12)
+    assert columns.size == expected
     assert bool(expected) == bool(scalar)
-    assert len(offsets) == len(expected) and not offsets.any()
-    for row, (column, sign) in zip(rows, expected, strict=True):
-        assert row[column] == sign and np.count_nonzero(row) == 1
+
 
 
 def test_a_tick_without_diagnostics_commands_the_same(robot):
