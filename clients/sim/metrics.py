@@ -17,8 +17,13 @@ __all__ = [
     "base_estimate_error_series",
     "base_estimate_errors",
     "compute_metrics",
+    "jump_metrics",
+    "sole_and_com_series",
     "strictly_inside",
 ]
+
+AIRBORNE_M = 0.005
+"""The soles count as off the ground when the lowest sole point is this high (m)."""
 
 JOINT_GROUPS = {
     "legs": ("hip", "knee", "ankle"),
@@ -102,6 +107,78 @@ def _foot_slip_and_rotation(record: RunRecord) -> tuple[float, float]:
             turn = pin.log3(anchor.rotation.T @ pose.rotation)
             rotation_rad = max(rotation_rad, float(np.linalg.norm(turn)))
     return slip_m, rotation_rad
+
+
+def sole_and_com_series(record: RunRecord) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per state: the lowest sole point's height, the CM height (m) and the feet's heading (rad).
+
+    Pinocchio forward kinematics of the scenario's model at the simulated states. The
+    heading is that of the mean x axis of the sole frames (the pelvis may yaw on the
+    hips), unwrapped, so a turn past ±180° keeps counting.
+    """
+    model = describe_model(record.scenario.model).model
+    data = model.createData()
+    frames = [model.getFrameId(contact.frame) for contact in record.welcome.contacts]
+    points = [np.array(contact.points_in_frame) for contact in record.welcome.contacts]
+    soles, coms, headings = [], [], []
+    for state in record.states:
+        q = np.concatenate(
+            [
+                state.position_base_in_world,
+                state.orientation_base_in_world_xyzw,
+                state.joint_position,
+            ]
+        )
+        pin.framesForwardKinematics(model, data, q)
+        soles.append(
+            min(
+                float(_points_in_world(data.oMf[frame], sole)[:, 2].min())
+                for frame, sole in zip(frames, points, strict=True)
+            )
+        )
+        coms.append(float(pin.centerOfMass(model, data, q)[2]))
+        x_axes = sum(data.oMf[frame].rotation[:2, 0] for frame in frames)
+        headings.append(float(np.arctan2(x_axes[1], x_axes[0])))
+    return np.array(soles), np.array(coms), np.unwrap(np.array(headings))
+
+
+def _points_in_world(placement: pin.SE3, points_in_frame: np.ndarray) -> np.ndarray:
+    return points_in_frame @ placement.rotation.T + placement.translation
+
+
+def jump_metrics(record: RunRecord) -> dict[str, float | bool]:
+    """A jump's height, flight, landing and turn, from the simulated states.
+
+    ``jump_clearance_m``: highest the lowest sole point rose above where it started;
+    ``jump_com_rise_m``: highest CM above its height at the start; ``jump_flight_s``:
+    longest stretch with every sole above :data:`AIRBORNE_M`; ``jump_landed``: did not
+    fall and every sole is down over the run's last 0.3 s; ``turn_deg``: change of the
+    feet's heading from the first state to the last.
+    """
+    soles, coms, headings = sole_and_com_series(record)
+    period_s = 1.0 / record.scenario.control_rate_hz
+    airborne = soles - soles[0] > AIRBORNE_M
+    longest = current = 0
+    for up in airborne:
+        current = current + 1 if up else 0
+        longest = max(longest, current)
+    last = max(1, round(0.3 / period_s))
+    return {
+        "jump_clearance_m": float(soles.max() - soles[0]),
+        "jump_com_rise_m": float(coms.max() - coms[0]),
+        "jump_flight_s": longest * period_s,
+        "jump_landed": bool(not record.fell and not airborne[-last:].any()),
+        "turn_deg": float(np.degrees(headings[-1] - headings[0])),
+    }
+
+
+def _jumps(record: RunRecord) -> bool:
+    """Does the scenario ask the server for a jump (`behavior = "jump"`, at start or later)?"""
+    scenario = record.scenario
+    return any(
+        params.get("behavior") == "jump"
+        for params in [scenario.params, *(change.params for change in scenario.param_changes)]
+    )
 
 
 def base_estimate_error_series(record: RunRecord) -> dict[str, np.ndarray]:
@@ -207,4 +284,5 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
             np.percentile([d.compute_time_s for d in diagnostics], 50) * 1e3
         ),
         **({"base_estimate_error": estimation} if estimation else {}),
+        **(jump_metrics(record) if _jumps(record) else {}),
     }

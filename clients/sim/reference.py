@@ -502,9 +502,7 @@ class ReferenceBackend:
             response = response[:, np.repeat(keep, 3)]
         acceleration += response @ forces.reshape(-1)
 
-    def _coulomb_solve(
-        self, system: np.ndarray, rhs: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def _coulomb_solve(self, system: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Solve ``system f = rhs``, no point pulling and none outside its friction cone.
 
         A point that would pull is released (its rows dropped). A point whose tangential
@@ -544,7 +542,6 @@ class ReferenceBackend:
                 break
             direction[leaving] = forces[leaving, :2] / tangential[leaving, None]
         return forces[keep], keep
-
 
     def _solve_normals_alone(
         self,

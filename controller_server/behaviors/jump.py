@@ -31,7 +31,9 @@ priorities as the jump goes (every change goes through the parameters):
   :data:`CONTACT_CHANGE_S`), or :data:`TAKEOFF_TIMEOUT_S` into a take-off
   that never left the ground: supports, contact, CM, trunk and angular
   momentum objectives back (L_r = 0), the rest pose back to the starting
-  pose, the CM height held where it is.
+  pose, and a target objective brings the falling CM back to the height it
+  landed at within ``jump_landing_duration_s`` (over 0.6 s, a 10 cm jump's
+  landing dipped so deep that a shin touched the floor).
 * ``recover`` once the CM moves up again (or after :data:`IMPACT_HOLD_S`): a
   target objective brings the CM back to its starting height over
   ``jump_recover_duration_s``.
@@ -116,6 +118,13 @@ JUMP_PARAMETERS: dict[str, ParamSpec] = {
     "jump_ankle_weight": ParamSpec(
         0.0, minimum=0.0, maximum=1e6, doc="jump: α of `ankle` (E_ankle) in flight; 0 = off"
     ),
+    "jump_landing_duration_s": ParamSpec(
+        0.25,
+        minimum=0.05,
+        maximum=10.0,
+        doc="jump: T of the target objective that stops the CM's fall after touch-down, back "
+        "to the height it landed at (s); longer lands softer and deeper",
+    ),
     "jump_recover_duration_s": ParamSpec(
         0.6, minimum=0.05, maximum=10.0, doc="jump: T of the return to standing height (s)"
     ),
@@ -194,6 +203,7 @@ class StandingJump:
         self.saved = {key: _copy(params[key]) for key in _CHANGED}
         """The parameters the jump changes, as they were: ``done`` puts them back."""
         self._standing = np.nan  # the CM height it jumps from, set at the first tick
+        self._feet_heading = 0.0  # the feet's mean heading then (rad)
         self._reach = float(standing_com_height)
         self.state = "stand"
         self._rest_pose = [float(x) for x in joint_position]
@@ -220,6 +230,7 @@ class StandingJump:
         airborne, grounded = self._airborne and settled, not self._airborne and settled
         if self.state == "stand" and elapsed == 0.0:
             self._standing = float(height)
+            self._feet_heading = _feet_heading(o.orientation_contact_frames_in_world)
             # The pose it jumps from is the rest pose: bent knees keep the CM height
             # controllable (at straight knees its Jacobian vanishes).
             return {"reference_joint_position": self._rest_pose}
@@ -299,10 +310,14 @@ class StandingJump:
                 reference_joint_position=self._rest_pose,
                 weight_angular_momentum=self.saved["weight_angular_momentum"],
                 com_height=float(height),
-                com_height_duration_s=p["jump_recover_duration_s"],
+                com_height_duration_s=p["jump_landing_duration_s"],
                 reference_angular_momentum=[0.0, 0.0, 0.0],
-                # Upright, facing where it landed (a twisting jump turned it).
-                reference_trunk_orientation_xyzw=_heading(o.orientation_base_in_world_xyzw),
+                # Upright, facing the way its feet landed (a twisting jump turned it; the
+                # pelvis, free to yaw on the hips, would turn back to where it took off).
+                reference_trunk_orientation_xyzw=_turned(
+                    p["reference_trunk_orientation_xyzw"],
+                    _feet_heading(o.orientation_contact_frames_in_world) - self._feet_heading,
+                ),
             )
         if self.state == "impact" and (rising or elapsed >= IMPACT_HOLD_S):
             return self._enter(
@@ -325,11 +340,18 @@ class StandingJump:
         return changes
 
 
-def _heading(orientation_xyzw: np.ndarray) -> list[float]:
-    """The yaw-only quaternion ``[0, 0, sin(ψ/2), cos(ψ/2)]`` of an orientation's heading."""
-    x, y, z, w = orientation_xyzw
-    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return [0.0, 0.0, float(np.sin(yaw / 2.0)), float(np.cos(yaw / 2.0))]
+def _feet_heading(orientations: np.ndarray) -> float:
+    """Mean heading (yaw of the x axis) of the ``(contacts, 3, 3)`` contact frames (rad)."""
+    x_axes = orientations[:, :2, 0].sum(axis=0)
+    return float(np.arctan2(x_axes[1], x_axes[0]))
+
+
+def _turned(orientation_xyzw: Any, yaw: float) -> list[float]:
+    """``orientation_xyzw`` turned by ``yaw`` about the world's vertical (xyzw)."""
+    x, y, z, w = (float(c) for c in orientation_xyzw)
+    s, c = float(np.sin(yaw / 2.0)), float(np.cos(yaw / 2.0))
+    # [0, 0, s, c] ⊗ [x, y, z, w]
+    return [c * x - s * y, c * y + s * x, c * z + s * w, c * w - s * z]
 
 
 def _copy(value: Any) -> Any:

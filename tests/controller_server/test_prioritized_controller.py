@@ -320,7 +320,6 @@ def test_joint_limit_rows_bound_the_position_reached_within_the_horizon(robot):
             [lower - 0.1, upper + 0.1, lower + 0.05, upper - 0.05, 0.5 * (lower + upper)]
         )
         v[joint.idx_v] = rng.choice([-2.0, 0.0, 2.0])
-    nu = model.nv - 6
     index = LayoutIndex(robot)
     columns, signs, offsets = index.joint_limit_bounds(q, v, horizon)
     rows = {(int(c), float(s)): float(f) for c, s, f in zip(columns, signs, offsets, strict=True)}
@@ -348,7 +347,6 @@ def test_joint_limit_rows_bound_the_position_reached_within_the_horizon(robot):
                 assert reached == pytest.approx(limit, abs=1e-12)
     assert columns.size == expected
     assert bool(expected) == bool(scalar)
-
 
 
 def test_a_tick_without_diagnostics_commands_the_same(robot):
