@@ -17,7 +17,9 @@ __all__ = [
     "base_estimate_error_series",
     "base_estimate_errors",
     "compute_metrics",
+    "is_walk",
     "strictly_inside",
+    "walking_metrics",
 ]
 
 JOINT_GROUPS = {
@@ -207,4 +209,70 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
             np.percentile([d.compute_time_s for d in diagnostics], 50) * 1e3
         ),
         **({"base_estimate_error": estimation} if estimation else {}),
+        **({"walking": walking_metrics(record)} if is_walk(record) else {}),
+    }
+
+
+def _controller_supports(record: RunRecord) -> list[list[bool]]:
+    """Per tick, the controller's supports (``diagnostics.supports``, carried over the ticks
+    without diagnostics; the client's flags where the record has no commands)."""
+    if not record.commands:
+        return [list(flags) for flags in record.contact_flags]
+    supports, current = [], list(record.contact_flags[0])
+    for command in record.commands:
+        if command.diagnostics is not None:
+            current = list(command.diagnostics.supports)
+        supports.append(current)
+    return supports
+
+
+def is_walk(record: RunRecord) -> bool:
+    """Whether the run is a walk (``behavior = "walk"`` in the scenario's parameters or
+    changes)."""
+    scenario = record.scenario
+    return scenario.params.get("behavior") == "walk" or any(
+        change.params.get("behavior") == "walk" for change in scenario.param_changes
+    )
+
+
+def walking_metrics(record: RunRecord) -> dict[str, Any]:
+    """A walk's report (issue 19): distance, speed, steps, slip, turn, fall.
+
+    ``distance_m`` is the base's horizontal displacement from the first state to the
+    last, ``speed_m_per_s`` that displacement from the first lift-off (the first tick a
+    support is released) to the end over the time it took, ``step_count`` the
+    touch-downs (a contact becoming a support again after it was released),
+    ``foot_slip_m`` the largest slide of a sole frame while it supports (as in
+    :func:`compute_metrics`), ``turn_deg`` the base's change of heading, ``fell``
+    whether it fell.
+    """
+    if not record.states:
+        return {"fell": record.fell, "distance_m": 0.0, "step_count": 0}
+    supports = _controller_supports(record)
+    start = np.asarray(record.states[0].position_base_in_world[:2])
+    end = np.asarray(record.states[-1].position_base_in_world[:2])
+    lift = next((tick for tick, flags in enumerate(supports) if not all(flags)), None)
+    steps = sum(
+        1
+        for before, after in zip(supports, supports[1:], strict=False)
+        for was, now in zip(before, after, strict=True)
+        if now and not was
+    )
+    speed = 0.0
+    if lift is not None and record.time_s[-1] > record.time_s[lift]:
+        origin = np.asarray(record.states[lift].position_base_in_world[:2])
+        speed = float(np.linalg.norm(end - origin)) / (record.time_s[-1] - record.time_s[lift])
+
+    def heading(state: Any) -> float:
+        return float(Rotation.from_quat(state.orientation_base_in_world_xyzw).as_euler("ZYX")[0])
+
+    turn = np.degrees(np.unwrap([heading(state) for state in record.states]))
+    slip_m, _ = _foot_slip_and_rotation(record)
+    return {
+        "fell": record.fell,
+        "distance_m": float(np.linalg.norm(end - start)),
+        "speed_m_per_s": speed,
+        "step_count": steps,
+        "foot_slip_m": slip_m,
+        "turn_deg": float(turn[-1] - turn[0]),
     }

@@ -167,10 +167,18 @@ WALK_PARAMETERS: dict[str, ParamSpec] = {
         doc="walk: priority of `pose` while walking (`swing` keeps its own priority)",
     ),
     "walk_com_height_weight": ParamSpec(
-        0.0,
+        1.0,
         minimum=0.0,
         maximum=1e6,
-        doc="walk: α of `com_height` while walking; 0 leaves the CM height free (§6.1)",
+        doc="walk: α of `com_height` (held at the height the walk starts from) while walking; "
+        "0 leaves the CM height free, as §6.1 does",
+    ),
+    "walk_com_height_priority": ParamSpec(
+        3,
+        kind="int",
+        minimum=1,
+        maximum=10,
+        doc="walk: priority of `com_height` while walking",
     ),
     "walk_arm_torque_weight": ParamSpec(
         0.0,
@@ -190,6 +198,8 @@ _CHANGED = (
     "priority_pose",
     "priority_torque",
     "weight_com_height",
+    "priority_com_height",
+    "com_height",
     "weight_torque",
     "torque_selection",
 )
@@ -358,6 +368,8 @@ class Walk:
         changes: dict[str, Any] = {
             "priority_pose": p["walk_pose_priority"],
             "weight_com_height": p["walk_com_height_weight"],
+            "priority_com_height": p["walk_com_height_priority"],
+            "com_height": float(o.position_com_in_world[2] - o.ground_height),
         }
         if p["walk_arm_torque_weight"] > 0.0 and selection.any():
             changes.update(
