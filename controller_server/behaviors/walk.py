@@ -94,6 +94,13 @@ WALK_PARAMETERS: dict[str, ParamSpec] = {
         maximum=1.5,
         doc="walk: commanded speed along the heading (m/s); 0 steps in place, then stands",
     ),
+    "walk_acceleration": ParamSpec(
+        0.3,
+        minimum=0.01,
+        maximum=10.0,
+        doc="walk: the speed the footholds plan for follows `walk_speed` at most this fast "
+        "(m/s²): a new speed is reached over a few steps, not in one",
+    ),
     "walk_turn_rate": ParamSpec(
         0.0, minimum=-1.0, maximum=1.0, doc="walk: commanded yaw rate of the heading (rad/s)"
     ),
@@ -259,6 +266,7 @@ class Walk:
         self._target_xy = np.zeros(2)
         self._knee_bend = None
         self._lean = None
+        self._speed = 0.0  # the planned speed: walk_speed, rate-limited (walk_acceleration)
         self._speed_correction = 0.0  # relative, learned step by step (walk_speed_gain)
         self._touchdown: tuple[float, np.ndarray] | None = None  # time, CM xy
 
@@ -276,6 +284,8 @@ class Walk:
         walking = self.state in ("swing", "double")
         if walking:
             self._heading += p["walk_turn_rate"] * dt
+            change = float(np.clip(p["walk_speed"] - self._speed, -1.0, 1.0))
+            self._speed += float(np.clip(change, -p["walk_acceleration"] * dt, p["walk_acceleration"] * dt))
         if (
             p["walk_knee_bend"] != self._knee_bend
             or p["walk_trunk_lean"] != self._lean
@@ -389,8 +399,9 @@ class Walk:
         """
         com_xy = o.position_com_in_world[:2].copy()
         previous, self._touchdown = self._touchdown, (o.time_s, com_xy)
-        speed = p["walk_speed"]
-        if previous is None or abs(speed) < 0.1 or o.time_s - previous[0] <= 0.0:
+        speed = self._speed
+        ramping = abs(p["walk_speed"] - speed) > 1e-6  # the step is not at the speed it aims for
+        if previous is None or abs(speed) < 0.1 or ramping or o.time_s - previous[0] <= 0.0:
             return
         measured = float((com_xy - previous[1]) @ _direction(self._heading)) / (
             o.time_s - previous[0]
@@ -506,7 +517,7 @@ class Walk:
         growth = math.exp(omega * period_s)
         width = self._width + 2.0 * p["walk_hip_shift"]
         toward_other = -1.0 if stance == self._left else 1.0
-        speed = p["walk_speed"] * (1.0 + self._speed_correction)
+        speed = self._speed * (1.0 + self._speed_correction)
         along = speed * period_s / (growth - 1.0)
         across = toward_other * width / (growth + 1.0)
         return along * _direction(heading) + across * _direction(heading + 0.5 * math.pi)
