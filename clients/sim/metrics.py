@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import numpy as np
@@ -214,11 +215,15 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
 
 
 def _controller_supports(record: RunRecord) -> list[list[bool]]:
-    """Per tick, the controller's supports (``diagnostics.supports``, carried over the ticks
-    without diagnostics; the client's flags where the record has no commands)."""
+    """Per tick, the controller's supports.
+
+    ``diagnostics.supports``, carried over the ticks without diagnostics; the client's flags
+    where the record has no commands.
+    """
     if not record.commands:
         return [list(flags) for flags in record.contact_flags]
-    supports, current = [], list(record.contact_flags[0])
+    supports: list[list[bool]] = []
+    current = list(record.contact_flags[0])
     for command in record.commands:
         if command.diagnostics is not None:
             current = list(command.diagnostics.supports)
@@ -227,8 +232,7 @@ def _controller_supports(record: RunRecord) -> list[list[bool]]:
 
 
 def is_walk(record: RunRecord) -> bool:
-    """Whether the run is a walk (``behavior = "walk"`` in the scenario's parameters or
-    changes)."""
+    """Whether the run is a walk: ``behavior = "walk"`` in its parameters or changes."""
     scenario = record.scenario
     return scenario.params.get("behavior") == "walk" or any(
         change.params.get("behavior") == "walk" for change in scenario.param_changes
@@ -254,7 +258,7 @@ def walking_metrics(record: RunRecord) -> dict[str, Any]:
     lift = next((tick for tick, flags in enumerate(supports) if not all(flags)), None)
     steps = sum(
         1
-        for before, after in zip(supports, supports[1:], strict=False)
+        for before, after in itertools.pairwise(supports)
         for was, now in zip(before, after, strict=True)
         if now and not was
     )

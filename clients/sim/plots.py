@@ -231,10 +231,10 @@ def _estimate_errors(ax: Any, errors: dict[str, np.ndarray]) -> None:
 
 
 def plot_walk_paths(record: RunRecord, path: Path) -> None:
-    """Plot a walk seen from above to ``path`` (PNG): the CM's ground projection, each sole
-    frame's path, and the sole's outline at every touch-down (issue 19).
+    """Plot a walk seen from above to ``path`` (PNG), issue 19.
 
-    Forward kinematics (Pinocchio, the scenario's model) of the simulated states; the
+    The CM's ground projection, each sole frame's path, and the sole's outline at every
+    touch-down. Forward kinematics (Pinocchio, the scenario's model) of the simulated states; the
     touch-downs are the ticks a contact becomes one of the controller's supports again.
     """
     import matplotlib
@@ -255,7 +255,11 @@ def plot_walk_paths(record: RunRecord, path: Path) -> None:
     current = list(record.contact_flags[0]) if record.contact_flags else []
     for tick, state in enumerate(record.states):
         q = np.concatenate(
-            [state.position_base_in_world, state.orientation_base_in_world_xyzw, state.joint_position]
+            [
+                state.position_base_in_world,
+                state.orientation_base_in_world_xyzw,
+                state.joint_position,
+            ]
         )
         pin.forwardKinematics(model, data, q)
         pin.updateFramePlacements(model, data)

@@ -8,5 +8,6 @@ would, so every change is visible in the parameters in force.
 """
 
 from controller_server.behaviors.jump import JUMP_PARAMETERS, Observation, StandingJump
+from controller_server.behaviors.walk import WALK_PARAMETERS, Walk
 
-__all__ = ["JUMP_PARAMETERS", "Observation", "StandingJump"]
+__all__ = ["JUMP_PARAMETERS", "WALK_PARAMETERS", "Observation", "StandingJump", "Walk"]

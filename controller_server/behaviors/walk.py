@@ -273,7 +273,7 @@ class Walk:
     # One tick -------------------------------------------------------------------------
 
     def update(self, observation: Observation, params: Mapping[str, Any]) -> dict[str, Any]:
-        """The parameters to set at this tick (the CM acceleration in :attr:`com_acceleration_xy`)."""
+        """The parameters to set at this tick (and :attr:`com_acceleration_xy`)."""
         o, p = observation, params
         changes: dict[str, Any] = {}
         if self._since_s is None:
@@ -285,7 +285,9 @@ class Walk:
         if walking:
             self._heading += p["walk_turn_rate"] * dt
             change = float(np.clip(p["walk_speed"] - self._speed, -1.0, 1.0))
-            self._speed += float(np.clip(change, -p["walk_acceleration"] * dt, p["walk_acceleration"] * dt))
+            self._speed += float(
+                np.clip(change, -p["walk_acceleration"] * dt, p["walk_acceleration"] * dt)
+            )
         if (
             p["walk_knee_bend"] != self._knee_bend
             or p["walk_trunk_lean"] != self._lean
@@ -371,7 +373,9 @@ class Walk:
         x, y, z, w = o.orientation_base_in_world_xyzw
         self._heading = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
         lateral = _direction(self._heading + 0.5 * math.pi)
-        sideways = [float(position[:2] @ lateral) for position in o.position_contact_frames_in_world]
+        sideways = [
+            float(position[:2] @ lateral) for position in o.position_contact_frames_in_world
+        ]
         self._left = int(np.argmax(sideways))
         self._width = abs(sideways[0] - sideways[1]) if len(sideways) > 1 else 0.2
         selection = np.where(self._arm_dofs, 1.0, 0.0)
@@ -423,8 +427,11 @@ class Walk:
         self._lean = p["walk_trunk_lean"]
         half_yaw, half_pitch = 0.5 * self._heading, 0.5 * self._lean
         # yaw about z, then pitch about the heading's y: q = q_z(ψ) ⊗ q_y(θ), xyzw.
-        cz, sz, cy, sy = math.cos(half_yaw), math.sin(half_yaw), math.cos(half_pitch), math.sin(
-            half_pitch
+        cz, sz, cy, sy = (
+            math.cos(half_yaw),
+            math.sin(half_yaw),
+            math.cos(half_pitch),
+            math.sin(half_pitch),
         )
         changes["reference_trunk_orientation_xyzw"] = [-sz * sy, cz * sy, sz * cy, cz * cy]
         return changes
@@ -479,7 +486,9 @@ class Walk:
         forward, lateral = _direction(heading), _direction(heading + 0.5 * math.pi)
         step = foothold - r
         side = 1.0 if foot == self._left else -1.0
-        along = float(np.clip(step @ forward, -p["walk_max_step_length"], p["walk_max_step_length"]))
+        along = float(
+            np.clip(step @ forward, -p["walk_max_step_length"], p["walk_max_step_length"])
+        )
         across = side * float(
             np.clip(
                 side * (step @ lateral),

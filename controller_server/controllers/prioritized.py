@@ -83,12 +83,12 @@ from controller_server.features import (
     compute_posture_objectives,
 )
 from controller_server.features.point_from_com import compute_point_from_com_objective
-from controller_server.features.swing_foot import compute_swing_objective
 from controller_server.features.setpoint import (
     critical_damping,
     setpoint_acceleration,
     target_acceleration,
 )
+from controller_server.features.swing_foot import compute_swing_objective
 from controller_server.inverse_dynamics import wrenches_from_point_forces
 from controller_server.models import RobotModel
 from controller_server.solvers.prioritized import Level, PrioritizedSolution, solve_prioritized

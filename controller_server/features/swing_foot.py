@@ -87,9 +87,13 @@ def swing_acceleration(
     goal = np.asarray(target.position_target_in_world, dtype=float)
     desired = np.empty(3)
     if remaining > TARGET_HANDOVER_S:
-        desired[:2] = target_acceleration(position[:2], velocity[:2], goal[:2], np.zeros(2), remaining)
+        desired[:2] = target_acceleration(
+            position[:2], velocity[:2], goal[:2], np.zeros(2), remaining
+        )
     else:
-        desired[:2] = setpoint_acceleration(goal[:2], position[:2], velocity[:2], stiffness, damping)
+        desired[:2] = setpoint_acceleration(
+            goal[:2], position[:2], velocity[:2], stiffness, damping
+        )
     apex_remaining = 0.5 * target.duration_s - elapsed
     if apex_remaining > TARGET_HANDOVER_S:
         desired[2] = target_acceleration(
@@ -138,5 +142,7 @@ def compute_swing_objective(
     """
     twist = jacobian @ v
     linear = swing_acceleration(target, time_s, position, twist[:3], stiffness, damping)
-    angular = stiffness * pin.log3(target.orientation_target_in_world @ rotation.T) - damping * twist[3:]
+    angular = (
+        stiffness * pin.log3(target.orientation_target_in_world @ rotation.T) - damping * twist[3:]
+    )
     return Objective(name, jacobian, np.concatenate([linear, angular]) - drift, np.full(6, weight))
