@@ -72,14 +72,6 @@ def test_survives_side_and_front_pushes_in_single_support(server):
     assert speed_between(record, 7.5, 9.0) > 0.4  # and it walks on
 
 
-def test_survives_a_push_away_from_the_stance_foot(server):
-    push = PushSpec(body="chest", force_in_world_N=(0.0, -100.0, 0.0), start_s=3.38, duration_s=0.1)
-    record = run_scenario(load_scenario("walk", duration_s=6.5, pushes=[push]), server.endpoint)
-    assert supports_at(record, 3.38).count(True) == 1
-    assert_walked_upright(record)
-    assert speed_between(record, 5.0, 6.5) > 0.4
-
-
 def test_speed_changed_mid_walk_by_set_params(server):
     scenario = load_scenario(
         "walk",
