@@ -13,7 +13,7 @@ import pytest
 
 from clients.sim.metrics import walking_metrics
 from clients.sim.runner import RunRecord, run_scenario
-from clients.sim.scenario import ParamChange, PushSpec, load_scenario
+from clients.sim.scenario import ParamChange, load_scenario
 
 pytestmark = pytest.mark.e2e
 
