@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 from typing import Any
 
 import numpy as np
@@ -20,6 +19,7 @@ __all__ = [
     "compute_metrics",
     "is_walk",
     "strictly_inside",
+    "touchdowns",
     "walking_metrics",
 ]
 
@@ -231,6 +231,33 @@ def _controller_supports(record: RunRecord) -> list[list[bool]]:
     return supports
 
 
+SWING_MIN_S = 0.05
+"""A contact released at least this long and then supporting again has stepped (shorter
+releases are a sole's flicker at touch-down)."""
+
+
+def touchdowns(
+    record: RunRecord, supports: list[list[bool]] | None = None
+) -> list[tuple[int, int]]:
+    """``(tick, contact)`` of each touch-down.
+
+    A touch-down is a contact that supports again (the controller's supports) after it
+    was released for at least :data:`SWING_MIN_S`.
+    """
+    supports = _controller_supports(record) if supports is None else supports
+    released_at: dict[int, float] = {}
+    events = []
+    for tick, flags in enumerate(supports):
+        time_s = record.time_s[tick]
+        for contact, on in enumerate(flags):
+            if not on:
+                released_at.setdefault(contact, time_s)
+            elif contact in released_at:
+                if time_s - released_at.pop(contact) >= SWING_MIN_S:
+                    events.append((tick, contact))
+    return events
+
+
 def is_walk(record: RunRecord) -> bool:
     """Whether the run is a walk: ``behavior = "walk"`` in its parameters or changes."""
     scenario = record.scenario
@@ -243,9 +270,9 @@ def walking_metrics(record: RunRecord) -> dict[str, Any]:
     """A walk's report (issue 19): distance, speed, steps, slip, turn, fall.
 
     ``distance_m`` is the base's horizontal displacement from the first state to the
-    last, ``speed_m_per_s`` that displacement from the first lift-off (the first tick a
-    support is released) to the end over the time it took, ``step_count`` the
-    touch-downs (a contact becoming a support again after it was released),
+    last, ``speed_m_per_s`` the displacement from the first lift-off (the first tick a
+    support is released) to the end over the time it took, ``final_speed_m_per_s`` the
+    same over the run's last half, ``step_count`` the touch-downs (:func:`touchdowns`),
     ``foot_slip_m`` the largest slide of a sole frame while it supports (as in
     :func:`compute_metrics`), ``turn_deg`` the base's change of heading, ``fell``
     whether it fell.
@@ -256,16 +283,19 @@ def walking_metrics(record: RunRecord) -> dict[str, Any]:
     start = np.asarray(record.states[0].position_base_in_world[:2])
     end = np.asarray(record.states[-1].position_base_in_world[:2])
     lift = next((tick for tick, flags in enumerate(supports) if not all(flags)), None)
-    steps = sum(
-        1
-        for before, after in itertools.pairwise(supports)
-        for was, now in zip(before, after, strict=True)
-        if now and not was
-    )
+    steps = len(touchdowns(record, supports))
     speed = 0.0
     if lift is not None and record.time_s[-1] > record.time_s[lift]:
         origin = np.asarray(record.states[lift].position_base_in_world[:2])
         speed = float(np.linalg.norm(end - origin)) / (record.time_s[-1] - record.time_s[lift])
+
+    half = len(record.states) // 2
+    final_speed = 0.0
+    if record.time_s[-1] > record.time_s[half]:
+        middle = np.asarray(record.states[half].position_base_in_world[:2])
+        final_speed = float(np.linalg.norm(end - middle)) / (
+            record.time_s[-1] - record.time_s[half]
+        )
 
     def heading(state: Any) -> float:
         return float(Rotation.from_quat(state.orientation_base_in_world_xyzw).as_euler("ZYX")[0])
@@ -276,6 +306,7 @@ def walking_metrics(record: RunRecord) -> dict[str, Any]:
         "fell": record.fell,
         "distance_m": float(np.linalg.norm(end - start)),
         "speed_m_per_s": speed,
+        "final_speed_m_per_s": final_speed,
         "step_count": steps,
         "foot_slip_m": slip_m,
         "turn_deg": float(turn[-1] - turn[0]),

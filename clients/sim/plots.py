@@ -234,8 +234,8 @@ def plot_walk_paths(record: RunRecord, path: Path) -> None:
     """Plot a walk seen from above to ``path`` (PNG), issue 19.
 
     The CM's ground projection, each sole frame's path, and the sole's outline at every
-    touch-down. Forward kinematics (Pinocchio, the scenario's model) of the simulated states; the
-    touch-downs are the ticks a contact becomes one of the controller's supports again.
+    touch-down (:func:`~clients.sim.metrics.touchdowns`), by forward kinematics
+    (Pinocchio, the scenario's model) of the simulated states.
     """
     import matplotlib
 
@@ -243,7 +243,7 @@ def plot_walk_paths(record: RunRecord, path: Path) -> None:
     import matplotlib.pyplot as plt
     import pinocchio as pin
 
-    from clients.sim.metrics import walking_metrics
+    from clients.sim.metrics import touchdowns, walking_metrics
     from clients.sim.model_file import describe_model
 
     model = describe_model(record.scenario.model).model
@@ -251,8 +251,9 @@ def plot_walk_paths(record: RunRecord, path: Path) -> None:
     contacts = record.welcome.contacts
     frames = [model.getFrameId(contact.frame) for contact in contacts]
     com, feet, outlines = [], [[] for _ in contacts], []
-    supports_before: list[bool] | None = None
-    current = list(record.contact_flags[0]) if record.contact_flags else []
+    landings: dict[int, list[int]] = {}
+    for tick, contact in touchdowns(record):
+        landings.setdefault(tick, []).append(contact)
     for tick, state in enumerate(record.states):
         q = np.concatenate(
             [
@@ -266,16 +267,11 @@ def plot_walk_paths(record: RunRecord, path: Path) -> None:
         com.append(pin.centerOfMass(model, data, q, False)[:2].copy())
         for index, frame in enumerate(frames):
             feet[index].append(data.oMf[frame].translation[:2].copy())
-        if tick < len(record.commands) and record.commands[tick].diagnostics is not None:
-            current = list(record.commands[tick].diagnostics.supports)
-        if supports_before is not None:
-            for index, (was, now) in enumerate(zip(supports_before, current, strict=True)):
-                if now and not was:
-                    corners = np.array(contacts[index].points_in_frame or [[0.0, 0.0, 0.0]])
-                    placement = data.oMf[frames[index]]
-                    points = (placement.rotation @ corners.T).T + placement.translation
-                    outlines.append((index, _outline(points[:, :2])))
-        supports_before = current
+        for index in landings.get(tick, []):
+            corners = np.array(contacts[index].points_in_frame or [[0.0, 0.0, 0.0]])
+            placement = data.oMf[frames[index]]
+            points = (placement.rotation @ corners.T).T + placement.translation
+            outlines.append((index, _outline(points[:, :2])))
     figure, ax = plt.subplots(figsize=(12, 4.5), constrained_layout=True)
     colors = ("C0", "C3", "C2", "C4")
     for index, contact in enumerate(contacts):

@@ -83,7 +83,7 @@ TOUCH_HEIGHT_M = 0.002
 MIN_WIDTH_FRACTION = 0.7
 """Footholds are at least this fraction of the standing width apart, sideways."""
 STOP_SPEED = 0.1
-"""With a zero command, the walk stops once the CM is slower than this (m/s)."""
+"""With a zero command, the walk stops once the CM moves forward slower than this (m/s)."""
 SHIFT_TOLERANCE_M = 0.01
 """``shift`` and ``stop`` end once the capture point is this close to where they drive it."""
 
@@ -358,7 +358,8 @@ class Walk:
         elif self.state == "double" and elapsed >= p["walk_double_support_s"]:
             feet_apart = np.array(centers[0][:2] - centers[1][:2])
             along = abs(feet_apart @ _direction(self._heading))
-            at_rest = np.linalg.norm(o.velocity_com_in_world[:2]) < STOP_SPEED
+            # Forward only: in place the CM still sways sideways from foot to foot.
+            at_rest = abs(o.velocity_com_in_world[:2] @ _direction(self._heading)) < STOP_SPEED
             if not command and at_rest and along < 0.1:
                 changes.update(self._enter(o, "stop"))
             else:
