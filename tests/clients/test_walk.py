@@ -12,6 +12,7 @@ import pinocchio as pin
 import pytest
 
 from clients.sim.metrics import walking_metrics
+from clients.sim.plots import plot_walk_paths
 from clients.sim.runner import RunRecord, run_scenario
 from clients.sim.scenario import ParamChange, load_scenario
 
@@ -52,9 +53,11 @@ def assert_walked_upright(record: RunRecord) -> dict:
     return metrics
 
 
-def test_walks_forward_at_the_commanded_speed(server):
+def test_walks_forward_at_the_commanded_speed(server, tmp_path):
     record = run_scenario(load_scenario("walk", duration_s=7.0), server.endpoint)
     metrics = assert_walked_upright(record)
+    plot_walk_paths(record, tmp_path / "paths.png")
+    assert (tmp_path / "paths.png").stat().st_size > 10_000
     assert metrics["step_count"] >= 10, metrics
     assert metrics["distance_m"] > 2.5, metrics
     # After the first steps (the speed ramps up, and the correction learns on them), at the
@@ -85,3 +88,29 @@ def test_speed_changed_mid_walk_by_set_params(server):
     slow, fast = speed_between(record, 3.0, 5.0), speed_between(record, 8.0, 10.0)
     assert 0.32 < slow < 0.5, slow
     assert fast > 0.7, fast
+
+
+def test_turns_stops_and_starts_again(server):
+    scenario = load_scenario(
+        "walk",
+        duration_s=11.0,
+        params={"behavior": "walk", "walk_speed": 0.4, "walk_turn_rate": 0.3},
+        param_changes=[
+            ParamChange(time_s=5.0, params={"walk_speed": 0.0, "walk_turn_rate": 0.0}),
+            ParamChange(time_s=8.0, params={"walk_speed": 0.4}),
+        ],
+    )
+    record = run_scenario(scenario, server.endpoint)
+    metrics = assert_walked_upright(record)
+    # 0.3 rad/s while stepping (from the first lift-off, about 0.6 s, to 5 s): about 76°.
+    assert 60.0 < metrics["turn_deg"] < 90.0, metrics
+    times = np.asarray(record.time_s)
+    standing = [
+        state for time_s, state in zip(times, record.states, strict=True) if 7.4 <= time_s < 8.0
+    ]
+    assert all(supports_at(record, t).count(True) == 2 for t in (7.4, 7.7, 7.99))
+    still = np.array([state.position_base_in_world[:2] for state in standing])
+    assert np.linalg.norm(still[-1] - still[0]) < 0.02  # stopped, standing on both feet
+    heading = np.radians(metrics["turn_deg"])
+    moved = record.states[-1].position_base_in_world[:2] - still[-1]
+    assert moved @ np.array([np.cos(heading), np.sin(heading)]) > 0.4  # walks on, turned
