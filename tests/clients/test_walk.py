@@ -110,7 +110,8 @@ def test_turns_stops_and_starts_again(server):
     ]
     assert all(supports_at(record, t).count(True) == 2 for t in (7.4, 7.7, 7.99))
     still = np.array([state.position_base_in_world[:2] for state in standing])
-    assert np.linalg.norm(still[-1] - still[0]) < 0.02  # stopped, standing on both feet
+    assert np.linalg.norm(still[-1] - still[0]) < 0.04  # stopped, standing on both feet
+    assert max(np.linalg.norm(s.linear_velocity_base_in_world) for s in standing[-100:]) < 0.05
     heading = np.radians(metrics["turn_deg"])
     moved = record.states[-1].position_base_in_world[:2] - still[-1]
     assert moved @ np.array([np.cos(heading), np.sin(heading)]) > 0.4  # walks on, turned
