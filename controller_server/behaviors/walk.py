@@ -187,6 +187,12 @@ WALK_PARAMETERS: dict[str, ParamSpec] = {
         maximum=10,
         doc="walk: priority of `com_height` while walking",
     ),
+    "walk_angular_momentum_weight": ParamSpec(
+        0.1,
+        minimum=0.0,
+        maximum=1e6,
+        doc="walk: α of `angular_momentum` (E_AM, L_r = 0) while walking",
+    ),
     "walk_arm_torque_weight": ParamSpec(
         0.0,
         minimum=0.0,
@@ -205,6 +211,7 @@ _CHANGED = (
     "priority_pose",
     "priority_torque",
     "weight_com_height",
+    "weight_angular_momentum",
     "priority_com_height",
     "com_height",
     "weight_torque",
@@ -384,6 +391,7 @@ class Walk:
             "priority_pose": p["walk_pose_priority"],
             "weight_com_height": p["walk_com_height_weight"],
             "priority_com_height": p["walk_com_height_priority"],
+            "weight_angular_momentum": p["walk_angular_momentum_weight"],
             "com_height": float(o.position_com_in_world[2] - o.ground_height),
         }
         if p["walk_arm_torque_weight"] > 0.0 and selection.any():
