@@ -80,7 +80,7 @@ def test_speed_changed_mid_walk_by_set_params(server):
         "walk",
         duration_s=10.0,
         # Knees bent more than in `walk`, as in `walk_fast`: at 0.8 m/s straighter legs fold.
-        params={"behavior": "walk", "walk_speed": 0.4, "walk_knee_bend": 0.2},
+        params={"behavior": "walk", "walk_speed": 0.4, "walk_knee_bend": 0.3},
         param_changes=[ParamChange(time_s=5.0, params={"walk_speed": 0.8})],
     )
     record = run_scenario(scenario, server.endpoint)
