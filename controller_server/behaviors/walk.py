@@ -407,8 +407,9 @@ class Walk:
 
         The pendulum's footholds are exact for the linear inverted pendulum only; the body's
         CM rises and falls and the legs carry momentum, so the measured speed falls short
-        of the command by a steady fraction (20 % at 0.5 m/s on the thesis humanoid). An
-        integral on the step's mean speed along the heading removes it.
+        of the command by a steady fraction (at 0.5 m/s the thesis humanoid walked 0.40 m/s;
+        the correction settles near +28 %). An integral on the step's mean speed along the
+        heading removes it.
         """
         com_xy = o.position_com_in_world[:2].copy()
         previous, self._touchdown = self._touchdown, (o.time_s, com_xy)
