@@ -250,10 +250,12 @@ def plot_walk_paths(record: RunRecord, path: Path) -> None:
     data = model.createData()
     contacts = record.welcome.contacts
     frames = [model.getFrameId(contact.frame) for contact in contacts]
-    com, feet, outlines = [], [[] for _ in contacts], []
+    com: list[np.ndarray] = []
+    feet: list[list[np.ndarray]] = [[] for _ in contacts]
+    outlines: list[tuple[int, np.ndarray]] = []
     landings: dict[int, list[int]] = {}
-    for tick, contact in touchdowns(record):
-        landings.setdefault(tick, []).append(contact)
+    for tick, foot in touchdowns(record):
+        landings.setdefault(tick, []).append(foot)
     for tick, state in enumerate(record.states):
         q = np.concatenate(
             [
@@ -268,7 +270,8 @@ def plot_walk_paths(record: RunRecord, path: Path) -> None:
         for index, frame in enumerate(frames):
             feet[index].append(data.oMf[frame].translation[:2].copy())
         for index in landings.get(tick, []):
-            corners = np.array(contacts[index].points_in_frame or [[0.0, 0.0, 0.0]])
+            sole = contacts[index].points_in_frame
+            corners = np.array(sole) if sole else np.zeros((1, 3))
             placement = data.oMf[frames[index]]
             points = (placement.rotation @ corners.T).T + placement.translation
             outlines.append((index, _outline(points[:, :2])))

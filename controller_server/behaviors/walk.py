@@ -271,8 +271,8 @@ class Walk:
         self._width = 0.2  # standing distance between the feet, sideways (m)
         self._stance = 1
         self._target_xy = np.zeros(2)
-        self._knee_bend = None
-        self._lean = None
+        self._knee_bend: float | None = None  # the rest pose's, as last set
+        self._lean: float | None = None
         self._speed = 0.0  # the planned speed: walk_speed, rate-limited (walk_acceleration)
         self._speed_correction = 0.0  # relative, learned step by step (walk_speed_gain)
         self._touchdown: tuple[float, np.ndarray] | None = None  # time, CM xy
@@ -287,7 +287,7 @@ class Walk:
             changes.update(self._begin(o, p))
         dt = 0.0 if self._last_s is None else max(o.time_s - self._last_s, 0.0)
         self._last_s = o.time_s
-        elapsed = o.time_s - self._since_s
+        elapsed = o.time_s - self._since()
         walking = self.state in ("swing", "double")
         if walking:
             self._heading += p["walk_turn_rate"] * dt
@@ -325,7 +325,7 @@ class Walk:
                 changes.update(self._enter(o, "shift"))
             else:
                 return changes
-        elapsed = o.time_s - self._since_s
+        elapsed = o.time_s - self._since()
         if self.state in ("shift", "stop"):
             if self.state == "stop":
                 self._target_xy = 0.5 * (centers[0][:2] + centers[1][:2])
@@ -431,11 +431,12 @@ class Walk:
     def _posture(self, p: Mapping[str, Any]) -> dict[str, Any]:
         """Rest pose (knee bend) and trunk reference (heading, lean)."""
         changes: dict[str, Any] = {}
-        if p["walk_knee_bend"] != self._knee_bend:
-            self._knee_bend = p["walk_knee_bend"]
-            changes["reference_joint_position"] = self._rest_pose(self._knee_bend)
-        self._lean = p["walk_trunk_lean"]
-        half_yaw, half_pitch = 0.5 * self._heading, 0.5 * self._lean
+        bend, lean = float(p["walk_knee_bend"]), float(p["walk_trunk_lean"])
+        if bend != self._knee_bend:
+            self._knee_bend = bend
+            changes["reference_joint_position"] = self._rest_pose(bend)
+        self._lean = lean
+        half_yaw, half_pitch = 0.5 * self._heading, 0.5 * lean
         # yaw about z, then pitch about the heading's y: q = q_z(ψ) ⊗ q_y(θ), xyzw.
         cz, sz, cy, sy = (
             math.cos(half_yaw),
@@ -540,6 +541,10 @@ class Walk:
         along = speed * period_s / (growth - 1.0)
         across = toward_other * width / (growth + 1.0)
         return along * _direction(heading) + across * _direction(heading + 0.5 * math.pi)
+
+    def _since(self) -> float:
+        """When the current state began (s; set at the first tick)."""
+        return 0.0 if self._since_s is None else self._since_s
 
     def _enter(self, observation: Observation, state: str) -> dict[str, Any]:
         self.state = state

@@ -97,7 +97,7 @@ def swing_acceleration(
     apex_remaining = 0.5 * target.duration_s - elapsed
     if apex_remaining > TARGET_HANDOVER_S:
         desired[2] = target_acceleration(
-            position[2], velocity[2], goal[2] + target.step_height, 0.0, apex_remaining
+            position[2], velocity[2], goal[2] + target.step_height, np.zeros(()), apex_remaining
         )
     elif apex_remaining > 0.0:
         desired[2] = setpoint_acceleration(
@@ -105,7 +105,7 @@ def swing_acceleration(
         )
     elif remaining > TARGET_HANDOVER_S:
         desired[2] = target_acceleration(
-            position[2], velocity[2], goal[2], -target.landing_speed, remaining
+            position[2], velocity[2], goal[2], np.full((), -target.landing_speed), remaining
         )
     else:  # down at the landing speed until the foot touches
         desired[2] = damping * (-target.landing_speed - velocity[2])
