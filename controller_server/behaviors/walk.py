@@ -51,11 +51,19 @@ foot's yaw follow it, and so does the trunk's reference.
 
 State-independent objectives (§6.2, Table 2): the trunk upright (``trunk``,
 leaning ``walk_trunk_lean`` forward), the angular momentum damped
-(E_AM, L_r = 0), the rest pose (E_pose; the pose the walk starts from, knees
-bent by ``walk_knee_bend`` more), the arms nearly passive
-(E_arms: ``torque`` on the shoulders and elbows, ``walk_arm_torque_weight``).
-The CM height is left free (the pendulum pivots on the stance leg), as
-§6.1 does: ``com_height`` weighs ``walk_com_height_weight`` (0 by default).
+(E_AM, L_r = 0) at ``walk_angular_momentum_weight`` (0.1: at the balance
+controller's 10, once the centre of pressure reached a sole's edge, the
+damping took the vertical ground force with it and the CM sank or shot up),
+the rest pose (E_pose, ranked at ``walk_pose_priority``; the pose the walk
+starts from, knees bent by ``walk_knee_bend`` more). E_arms, the minimum
+torque on the shoulders and elbows, is ``walk_arm_torque_weight``, off by
+default (not yet tuned). §6.1 leaves the CM height free; here ``com_height``
+holds the height the walk starts from (``walk_com_height_weight``, ranked with
+the rest pose): left free, the stance leg straightened and the robot rose
+off it after pushes in MuJoCo. Priorities while walking: ``contact`` 1;
+``com``, ``angular_momentum``, ``trunk``, ``swing`` 2; ``pose``,
+``com_height`` 3 (``swing`` at 3, Table 2's level, did not walk: the rest
+pose held the swing leg back).
 """
 
 from __future__ import annotations
