@@ -59,8 +59,8 @@ starts from, knees bent by ``walk_knee_bend`` more). E_arms, the minimum
 torque on the shoulders and elbows, is ``walk_arm_torque_weight``, off by
 default (not yet tuned). §6.1 leaves the CM height free; here ``com_height``
 holds the height the walk starts from (``walk_com_height_weight``, ranked with
-the rest pose): left free, the stance leg straightened and the robot rose
-off it after pushes in MuJoCo. Priorities while walking: ``contact`` 1;
+the rest pose; 0 frees it, which has not been measured with the other
+defaults as they are now). Priorities while walking: ``contact`` 1;
 ``com``, ``angular_momentum``, ``trunk``, ``swing`` 2; ``pose``,
 ``com_height`` 3 (``swing`` at 3, Table 2's level, did not walk: the rest
 pose held the swing leg back).
