@@ -12,7 +12,7 @@ from clients.progress import ProgressBar
 from clients.server_process import ServerProcess
 from clients.sim.metrics import compute_metrics
 from clients.sim.output import OutputDirectory
-from clients.sim.plots import plot_run
+from clients.sim.plots import plot_run, plot_walk_paths
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import PushSpec, Scenario, load_scenario
 from clients.sim.series import save_series
@@ -99,6 +99,9 @@ def run_scenarios(
             if record.commands:
                 metrics["plot"] = str(output_dir / f"{scenario.name}.png")
                 plot_run(record, Path(metrics["plot"]))
+                if "walking" in metrics:
+                    metrics["walking"]["plot"] = str(output_dir / f"{scenario.name}_paths.png")
+                    plot_walk_paths(record, Path(metrics["walking"]["plot"]))
                 if series:
                     metrics["series"] = str(
                         save_series(record, output_dir / f"{scenario.name}.npz")

@@ -14,12 +14,15 @@ from clients.sim.runner import RunRecord
 
 __all__ = [
     "JOINT_GROUPS",
+    "asks_behavior",
     "base_estimate_error_series",
     "base_estimate_errors",
     "compute_metrics",
     "jump_metrics",
     "sole_and_com_series",
     "strictly_inside",
+    "touchdowns",
+    "walking_metrics",
 ]
 
 AIRBORNE_M = 0.005
@@ -149,9 +152,9 @@ def _points_in_world(placement: pin.SE3, points_in_frame: np.ndarray) -> np.ndar
 def jump_metrics(record: RunRecord) -> dict[str, float | bool]:
     """A jump's height, flight, landing and turn, from the simulated states.
 
-    ``jump_clearance_m``: highest the lowest sole point rose above where it started;
-    ``jump_com_rise_m``: highest CM above its height at the start; ``jump_flight_s``:
-    longest stretch with every sole above :data:`AIRBORNE_M`; ``jump_landed``: did not
+    ``clearance_m``: highest the lowest sole point rose above where it started;
+    ``com_rise_m``: highest CM above its height at the start; ``flight_s``:
+    longest stretch with every sole above :data:`AIRBORNE_M`; ``landed``: did not
     fall and every sole is down over the run's last 0.3 s; ``turn_deg``: change of the
     feet's heading from the first state to the last.
     """
@@ -164,21 +167,12 @@ def jump_metrics(record: RunRecord) -> dict[str, float | bool]:
         longest = max(longest, current)
     last = max(1, round(0.3 / period_s))
     return {
-        "jump_clearance_m": float(soles.max() - soles[0]),
-        "jump_com_rise_m": float(coms.max() - coms[0]),
-        "jump_flight_s": longest * period_s,
-        "jump_landed": bool(not record.fell and not airborne[-last:].any()),
+        "clearance_m": float(soles.max() - soles[0]),
+        "com_rise_m": float(coms.max() - coms[0]),
+        "flight_s": longest * period_s,
+        "landed": bool(not record.fell and not airborne[-last:].any()),
         "turn_deg": float(np.degrees(headings[-1] - headings[0])),
     }
-
-
-def _jumps(record: RunRecord) -> bool:
-    """Does the scenario ask the server for a jump (`behavior = "jump"`, at start or later)?"""
-    scenario = record.scenario
-    return any(
-        params.get("behavior") == "jump"
-        for params in [scenario.params, *(change.params for change in scenario.param_changes)]
-    )
 
 
 def base_estimate_error_series(record: RunRecord) -> dict[str, np.ndarray]:
@@ -284,5 +278,106 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
             np.percentile([d.compute_time_s for d in diagnostics], 50) * 1e3
         ),
         **({"base_estimate_error": estimation} if estimation else {}),
-        **(jump_metrics(record) if _jumps(record) else {}),
+        **({"jump": jump_metrics(record)} if asks_behavior(record, "jump") else {}),
+        **({"walking": walking_metrics(record)} if asks_behavior(record, "walk") else {}),
+    }
+
+
+def _controller_supports(record: RunRecord) -> list[list[bool]]:
+    """Per tick, the controller's supports.
+
+    ``diagnostics.supports``, carried over the ticks without diagnostics; the client's flags
+    where the record has no commands.
+    """
+    if not record.commands:
+        return [list(flags) for flags in record.contact_flags]
+    supports: list[list[bool]] = []
+    current = list(record.contact_flags[0])
+    for command in record.commands:
+        if command.diagnostics is not None:
+            current = list(command.diagnostics.supports)
+        supports.append(current)
+    return supports
+
+
+SWING_MIN_S = 0.05
+"""A contact released at least this long and then supporting again has stepped (shorter
+releases are a sole's flicker at touch-down)."""
+
+
+def touchdowns(
+    record: RunRecord, supports: list[list[bool]] | None = None
+) -> list[tuple[int, int]]:
+    """``(tick, contact)`` of each touch-down.
+
+    A touch-down is a contact that supports again (the controller's supports) after it
+    was released for at least :data:`SWING_MIN_S`.
+    """
+    supports = _controller_supports(record) if supports is None else supports
+    released_at: dict[int, float] = {}
+    events = []
+    for tick, flags in enumerate(supports):
+        time_s = record.time_s[tick]
+        for contact, on in enumerate(flags):
+            if not on:
+                released_at.setdefault(contact, time_s)
+            elif contact in released_at:
+                if time_s - released_at.pop(contact) >= SWING_MIN_S:
+                    events.append((tick, contact))
+    return events
+
+
+def asks_behavior(record: RunRecord, behavior: str) -> bool:
+    """Whether the scenario asks for ``behavior`` (``"jump"``, ``"walk"``) at start or later."""
+    scenario = record.scenario
+    return any(
+        params.get("behavior") == behavior
+        for params in [scenario.params, *(change.params for change in scenario.param_changes)]
+    )
+
+
+def walking_metrics(record: RunRecord) -> dict[str, Any]:
+    """A walk's report (issue 19): distance, speed, steps, slip, turn, fall.
+
+    ``distance_m`` is the base's horizontal displacement from the first state to the
+    last, ``speed_m_per_s`` the displacement from the first lift-off (the first tick a
+    support is released) to the end over the time it took, ``final_speed_m_per_s`` the
+    same over the run's last half, ``step_count`` the touch-downs (:func:`touchdowns`),
+    ``foot_slip_m`` the largest slide of a sole frame while it supports (as in
+    :func:`compute_metrics`), ``turn_deg`` the base's change of heading, ``fell``
+    whether it fell.
+    """
+    if not record.states:
+        return {"fell": record.fell, "distance_m": 0.0, "step_count": 0}
+    supports = _controller_supports(record)
+    start = np.asarray(record.states[0].position_base_in_world[:2])
+    end = np.asarray(record.states[-1].position_base_in_world[:2])
+    lift = next((tick for tick, flags in enumerate(supports) if not all(flags)), None)
+    steps = len(touchdowns(record, supports))
+    speed = 0.0
+    if lift is not None and record.time_s[-1] > record.time_s[lift]:
+        origin = np.asarray(record.states[lift].position_base_in_world[:2])
+        speed = float(np.linalg.norm(end - origin)) / (record.time_s[-1] - record.time_s[lift])
+
+    half = len(record.states) // 2
+    final_speed = 0.0
+    if record.time_s[-1] > record.time_s[half]:
+        middle = np.asarray(record.states[half].position_base_in_world[:2])
+        final_speed = float(np.linalg.norm(end - middle)) / (
+            record.time_s[-1] - record.time_s[half]
+        )
+
+    def heading(state: Any) -> float:
+        return float(Rotation.from_quat(state.orientation_base_in_world_xyzw).as_euler("ZYX")[0])
+
+    turn = np.degrees(np.unwrap([heading(state) for state in record.states]))
+    slip_m, _ = _foot_slip_and_rotation(record)
+    return {
+        "fell": record.fell,
+        "distance_m": float(np.linalg.norm(end - start)),
+        "speed_m_per_s": speed,
+        "final_speed_m_per_s": final_speed,
+        "step_count": steps,
+        "foot_slip_m": slip_m,
+        "turn_deg": float(turn[-1] - turn[0]),
     }

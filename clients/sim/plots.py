@@ -23,7 +23,14 @@ from clients.sim.runner import RunRecord
 from clients.sim.scenario import PushSpec
 from protocol.messages import Command, JointInfo
 
-__all__ = ["PlotSeries", "dof_names", "plot_run", "plot_series", "series_of_run"]
+__all__ = [
+    "PlotSeries",
+    "dof_names",
+    "plot_run",
+    "plot_series",
+    "plot_walk_paths",
+    "series_of_run",
+]
 
 WORST_JOINTS = 4
 """Joints drawn one by one in the torque panel: those of highest peak |τ|."""
@@ -221,3 +228,79 @@ def _estimate_errors(ax: Any, errors: dict[str, np.ndarray]) -> None:
     lines = ax.get_legend_handles_labels()
     more = height_axis.get_legend_handles_labels()
     ax.legend(lines[0] + more[0], lines[1] + more[1], loc="upper left", fontsize=7)
+
+
+def plot_walk_paths(record: RunRecord, path: Path) -> None:
+    """Plot a walk seen from above to ``path`` (PNG), issue 19.
+
+    The CM's ground projection, each sole frame's path, and the sole's outline at every
+    touch-down (:func:`~clients.sim.metrics.touchdowns`), by forward kinematics
+    (Pinocchio, the scenario's model) of the simulated states.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pinocchio as pin
+
+    from clients.sim.metrics import touchdowns, walking_metrics
+    from clients.sim.model_file import describe_model
+
+    model = describe_model(record.scenario.model).model
+    data = model.createData()
+    contacts = record.welcome.contacts
+    frames = [model.getFrameId(contact.frame) for contact in contacts]
+    com: list[np.ndarray] = []
+    feet: list[list[np.ndarray]] = [[] for _ in contacts]
+    outlines: list[tuple[int, np.ndarray]] = []
+    landings: dict[int, list[int]] = {}
+    for tick, foot in touchdowns(record):
+        landings.setdefault(tick, []).append(foot)
+    for tick, state in enumerate(record.states):
+        q = np.concatenate(
+            [
+                state.position_base_in_world,
+                state.orientation_base_in_world_xyzw,
+                state.joint_position,
+            ]
+        )
+        pin.forwardKinematics(model, data, q)
+        pin.updateFramePlacements(model, data)
+        com.append(pin.centerOfMass(model, data, q, False)[:2].copy())
+        for index, frame in enumerate(frames):
+            feet[index].append(data.oMf[frame].translation[:2].copy())
+        for index in landings.get(tick, []):
+            sole = contacts[index].points_in_frame
+            corners = np.array(sole) if sole else np.zeros((1, 3))
+            placement = data.oMf[frames[index]]
+            points = (placement.rotation @ corners.T).T + placement.translation
+            outlines.append((index, _outline(points[:, :2])))
+    figure, ax = plt.subplots(figsize=(12, 4.5), constrained_layout=True)
+    colors = ("C0", "C3", "C2", "C4")
+    for index, contact in enumerate(contacts):
+        path_xy = np.array(feet[index])
+        ax.plot(*path_xy.T, "-", lw=0.8, color=colors[index % 4], label=f"{contact.name} path")
+    for index, outline in outlines:
+        ax.fill(*outline.T, alpha=0.25, color=colors[index % 4])
+    ax.plot(*np.array(com).T, "k-", lw=1.5, label="CM (ground projection)")
+    metrics = walking_metrics(record)
+    status = f"fell at {record.fall_time_s:.2f} s" if record.fell else "stayed up"
+    ax.set(
+        title=f"{record.scenario.name} ({record.scenario.backend}), seen from above: "
+        f"{metrics['distance_m']:.2f} m at {metrics.get('speed_m_per_s', 0.0):.2f} m/s, "
+        f"{metrics['step_count']} steps, {status}",
+        xlabel="x (m)",
+        ylabel="y (m)",
+        aspect="equal",
+    )
+    ax.legend(loc="best", fontsize=7)
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def _outline(points_xy: np.ndarray) -> np.ndarray:
+    """The closed convex outline of a few sole points (counter-clockwise)."""
+    center = points_xy.mean(axis=0)
+    order = np.argsort(np.arctan2(*(points_xy - center).T[::-1]))
+    ordered = points_xy[order]
+    return np.vstack([ordered, ordered[:1]])

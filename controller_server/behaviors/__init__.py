@@ -7,6 +7,8 @@ parameters to set now; the controller applies them as a ``set_params``
 would, so every change is visible in the parameters in force.
 """
 
-from controller_server.behaviors.jump import JUMP_PARAMETERS, Observation, StandingJump
+from controller_server.behaviors.jump import JUMP_PARAMETERS, StandingJump
+from controller_server.behaviors.observation import Observation
+from controller_server.behaviors.walk import WALK_PARAMETERS, Walk
 
-__all__ = ["JUMP_PARAMETERS", "Observation", "StandingJump"]
+__all__ = ["JUMP_PARAMETERS", "WALK_PARAMETERS", "Observation", "StandingJump", "Walk"]

@@ -49,14 +49,14 @@ take-off pose lands them better).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from controller_server.behaviors.observation import Observation
 from controller_server.controllers.base import ParamSpec
 
-__all__ = ["JUMP_PARAMETERS", "JUMP_STATES", "Observation", "StandingJump"]
+__all__ = ["JUMP_PARAMETERS", "JUMP_STATES", "StandingJump"]
 
 JUMP_STATES = ("stand", "compress", "thrust", "ascent", "descent", "impact", "recover", "done")
 IMPACT_HOLD_S = 0.3
@@ -72,13 +72,13 @@ JUMP_PARAMETERS: dict[str, ParamSpec] = {
         0.3, minimum=0.0, maximum=60.0, doc="jump: balance this long before compressing (s)"
     ),
     "jump_crouch_depth": ParamSpec(
-        0.08, minimum=0.0, maximum=1.0, doc="jump: CM lowered by this much in `compress` (m)"
+        0.12, minimum=0.0, maximum=1.0, doc="jump: CM lowered by this much in `compress` (m)"
     ),
     "jump_compress_duration_s": ParamSpec(
         0.4, minimum=0.05, maximum=10.0, doc="jump: T of the crouch's target objective (s)"
     ),
     "jump_takeoff_speed": ParamSpec(
-        1.6,
+        2.6,
         minimum=0.0,
         maximum=10.0,
         doc="jump: upward CM speed `thrust` asks for at the standing pose's height (m/s)",
@@ -151,33 +151,6 @@ _CHANGED = (
 )
 """Every parameter the jump sets; ``done`` puts them back (but the rest pose and the CM
 height, which stay those of the pose it jumped from)."""
-
-
-@dataclass(frozen=True)
-class Observation:
-    """What a behaviour sees of one tick.
-
-    Attributes:
-        time_s: Client time (s).
-        position_com_in_world: CM (m).
-        velocity_com_in_world: CM velocity (m/s).
-        touching: Per contact, its flag from the client.
-        position_contact_frames_in_world: ``(contacts, 3)`` contact frame origins (m).
-        orientation_contact_frames_in_world: ``(contacts, 3, 3)`` their rotations.
-        joint_position: Joint positions, wire order (ball joints: xyzw).
-        orientation_base_in_world_xyzw: Root orientation, scalar last.
-        ground_height: Ground plane height (m).
-    """
-
-    time_s: float
-    position_com_in_world: np.ndarray
-    velocity_com_in_world: np.ndarray
-    touching: tuple[bool, ...]
-    position_contact_frames_in_world: np.ndarray
-    orientation_contact_frames_in_world: np.ndarray
-    joint_position: np.ndarray
-    orientation_base_in_world_xyzw: np.ndarray
-    ground_height: float
 
 
 class StandingJump:

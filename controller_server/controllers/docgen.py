@@ -71,6 +71,12 @@ def render_controllers_doc() -> str:
         )
         if name == "momentum":
             sections.append(doc + "\n\n" + POINTS)
+        if name == "prioritized":
+            from controller_server.behaviors import walk
+
+            sections.append(
+                '### Walking (`behavior = "walk"`)\n\n' + (walk.__doc__ or "").strip() + "\n"
+            )
     return "\n".join(sections)
 
 

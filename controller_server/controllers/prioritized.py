@@ -55,7 +55,9 @@ from controller_server.balance_points import (
     ground_reference_points,
     shrink_polygon,
 )
-from controller_server.behaviors.jump import JUMP_PARAMETERS, Observation, StandingJump
+from controller_server.behaviors.jump import JUMP_PARAMETERS, StandingJump
+from controller_server.behaviors.observation import Observation
+from controller_server.behaviors.walk import WALK_PARAMETERS, Walk
 from controller_server.constraints import compute_support_equalities
 from controller_server.controllers.base import (
     CONTACT_PARAMETERS,
@@ -89,6 +91,7 @@ from controller_server.features.setpoint import (
     setpoint_acceleration,
     target_acceleration,
 )
+from controller_server.features.swing_foot import compute_swing_objective
 from controller_server.inverse_dynamics import wrenches_from_point_forces
 from controller_server.models import RobotModel
 from controller_server.solvers.prioritized import Level, PrioritizedSolution, solve_prioritized
@@ -132,6 +135,11 @@ OBJECTIVES: dict[str, tuple[int, float, str]] = {
         "each foot at its take-off offset from the CM in a jump's flight (E_ankle, §5)",
     ),
     "torque": (3, 1.0, "minimum torque on `torque_selection` (eq. 15)"),
+    "swing": (
+        2,
+        10.0,
+        "a walk's swing foot toward its foothold, lifted by the step height (E_swing, §6.1)",
+    ),
 }
 """Objective name → (default priority, default weight α, role).
 
@@ -254,11 +262,14 @@ class PrioritizedController(Controller):
         "behavior": ParamSpec(
             "balance",
             kind="choice",
-            choices=("balance", "jump"),
+            choices=("balance", "jump", "walk"),
             doc="`jump`: one standing (or twisting) jump, de Lasa §5 (the `jump_` parameters); "
-            "set it again to jump again; `balance` stops a jump and restores what it changed",
+            "set it again to jump again; `walk`: walking, de Lasa §6 with capture-point "
+            "footholds (the `walk_` parameters); `balance` stops a jump or a walk and "
+            "restores what it changed",
         ),
         **JUMP_PARAMETERS,
+        **WALK_PARAMETERS,
         "damping_ratio": ParamSpec(
             1.0, minimum=0.0, maximum=100.0, doc="ζ of every setpoint: k_v = 2 ζ √k_p (eq. 4)"
         ),
@@ -304,6 +315,7 @@ class PrioritizedController(Controller):
         self._height_change_start_s: float | None = None  # state time a new height was set
         self._pending_height_change = False
         self._jump: StandingJump | None = None
+        self._walk: Walk | None = None
         super().__init__(robot, params)
 
     def default_value(self, key: str) -> Any:
@@ -331,6 +343,10 @@ class PrioritizedController(Controller):
             jump, self._jump = self._jump, None
             if jump is not None and jump.state != "done":
                 super().set_params(jump.saved)
+                self._derived = {}
+            walk, self._walk = self._walk, None
+            if walk is not None:
+                super().set_params(walk.saved)
                 self._derived = {}
 
     def _validate(self, key: str, value: Any) -> Any:
@@ -366,6 +382,8 @@ class PrioritizedController(Controller):
         check_finite_dynamics(terms)
         if self._params["behavior"] == "jump":
             self._step_jump(control_input, terms)
+        elif self._params["behavior"] == "walk":
+            self._step_walk(control_input, terms)
         p = self._params
         flags = self.supports(control_input)
         layout = PrioritizedLayout(
@@ -452,7 +470,17 @@ class PrioritizedController(Controller):
         p = self._params
         if self._jump is None:
             self._jump = StandingJump(p, control_input.q[7:], self.default_value("com_height"))
-        observation = Observation(
+        observation = self._observation(control_input, terms)
+        changes = self._jump.update(observation, p)
+        if changes:
+            super().set_params(changes)
+            self._derived = {}
+            if "com_height" in changes:
+                self._pending_height_change = True
+
+    def _observation(self, control_input: ControlInput, terms: DynamicsTerms) -> Observation:
+        """What a behaviour sees of this tick."""
+        return Observation(
             time_s=control_input.time_s,
             position_com_in_world=terms.position_com_in_world,
             velocity_com_in_world=terms.momentum.linear_momentum / terms.total_mass,
@@ -463,18 +491,58 @@ class PrioritizedController(Controller):
             orientation_contact_frames_in_world=np.array(
                 [self._data.oMf[c.frame_id].rotation for c in self.robot.contacts]
             ),
-            ground_height=p["ground_height"],
+            ground_height=self._params["ground_height"],
         )
-        changes = self._jump.update(observation, p)
+
+    def _step_walk(self, control_input: ControlInput, terms: DynamicsTerms) -> None:
+        """Advance the walk's state machine (§6) and apply what it sets at this tick.
+
+        The walk asks `com` for a CM acceleration ``a``; eq. 4's setpoint asks
+        ``k_p (s + o − c) − k_v ċ`` of it (``s`` the centroid of the supports this tick,
+        ``o`` = ``com_offset_xy``), so ``o = c + (a + k_v ċ)/k_p − s`` (still limited to
+        what the supports can push, as any `com` request).
+        """
+        p = self._params
+        robot = self.robot
+        if self._walk is None:
+            self._walk = Walk(
+                p,
+                [np.asarray(c.points_in_frame) for c in robot.contacts],
+                control_input.q[7:],
+                _knee_bend_direction(robot),
+                _arm_dofs(robot),
+                self._gravity,
+                robot.model,
+            )
+        observation = self._observation(control_input, terms)
+        com, com_velocity = observation.position_com_in_world, observation.velocity_com_in_world
+        walk = self._walk
+        changes = walk.update(observation, p)
+        acceleration = walk.com_acceleration_xy
+        if acceleration is not None:
+            mask = changes.get("support_mask", p["support_mask"])
+            supports = [
+                points
+                for points, on, allowed in zip(
+                    terms.position_points_in_world, control_input.contact_flags, mask, strict=True
+                )
+                if on and allowed > 0.5
+            ]
+            stiffness = p["com_stiffness"]
+            if supports and stiffness > 0.0:
+                centroid = np.vstack(supports)[:, :2].mean(axis=0)
+                damping = critical_damping(stiffness, p["damping_ratio"])
+                offset = com[:2] + (acceleration + damping * com_velocity[:2]) / stiffness
+                changes["com_offset_xy"] = np.clip(offset - centroid, -10.0, 10.0).tolist()
         if changes:
             super().set_params(changes)
             self._derived = {}
-            if "com_height" in changes:
-                self._pending_height_change = True
 
     @property
     def behavior_state(self) -> str:
-        """``balance``, or the jump's state (``stand``, ``compress`` … ``done``)."""
+        """``balance``, or the jump's or walk's state (``stand``, ``compress`` … ``done``)."""
+        if self._walk is not None:
+            return self._walk.state
         return "balance" if self._jump is None else self._jump.state
 
     def _planted(self) -> tuple[bool, ...]:
@@ -606,6 +674,24 @@ class PrioritizedController(Controller):
                     reference_rotations=jump.foot_rotations,
                     angular_jacobians=[jacobian[3:] for jacobian in terms.support_jacobians],
                     angular_drifts=[drift[3:] for drift in terms.support_drifts],
+                )
+            )
+        walk = self._walk
+        if p["weight_swing"] > 0 and walk is not None and walk.swing is not None:
+            foot = walk.swing.contact
+            stiffness = p["walk_swing_stiffness"]
+            on_acceleration.append(
+                compute_swing_objective(
+                    walk.swing,
+                    control_input.time_s,
+                    terms.support_jacobians[foot],
+                    terms.support_drifts[foot],
+                    terms.position_contact_frames_in_world[foot],
+                    self._data.oMf[self.robot.contacts[foot].frame_id].rotation,
+                    v,
+                    stiffness,
+                    critical_damping(stiffness, ratio),
+                    p["weight_swing"],
                 )
             )
         objectives = {
@@ -794,6 +880,34 @@ class PrioritizedController(Controller):
                 "inequality_violation": solution.inequality_violation,
             },
         }
+
+
+def _knee_bend_direction(robot: RobotModel) -> np.ndarray:
+    """Per joint DoF: +1 on a knee's pitch (local y), −½ on a hip's or an ankle's, else 0."""
+    model = robot.model
+    direction = np.zeros(model.nv - NUM_ROOT_DOFS)
+    for joint_id in range(2, model.njoints):
+        name, joint = model.names[joint_id], model.joints[joint_id]
+        start = joint.idx_v - NUM_ROOT_DOFS
+        scale = 1.0 if "knee" in name else -0.5 if ("hip" in name or "ankle" in name) else 0.0
+        kind = joint.shortname()
+        if scale and kind == "JointModelSpherical":
+            direction[start + 1] = scale
+        elif scale and kind == "JointModelRY":
+            direction[start] = scale
+    return direction
+
+
+def _arm_dofs(robot: RobotModel) -> np.ndarray:
+    """Per joint DoF, whether it belongs to a shoulder or an elbow (E_arms of §6.2)."""
+    model = robot.model
+    arms = np.zeros(model.nv - NUM_ROOT_DOFS, dtype=bool)
+    for joint_id in range(2, model.njoints):
+        joint = model.joints[joint_id]
+        if any(word in model.names[joint_id] for word in ("shoulder", "elbow")):
+            start = joint.idx_v - NUM_ROOT_DOFS
+            arms[start : start + joint.nv] = True
+    return arms
 
 
 def _residual(term: _Term, x: np.ndarray) -> float:

@@ -25,6 +25,9 @@ from controller_server.features import Objective
 from controller_server.models import RobotModel
 
 __all__ = [
+    "DEFAULT_LIMIT_HORIZON_S",
+    "LIMIT_ACCELERATION_ACTIVE",
+    "LIMIT_ACCELERATION_CAP",
     "NUM_ROOT_DOFS",
     "LayoutIndex",
     "PrioritizedLayout",
