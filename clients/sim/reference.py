@@ -462,9 +462,10 @@ class ReferenceBackend:
         ``f_s`` the springs, the force that acts during the step solves
         ``f = f_s − C (J (v + Δt a_free) + Δt G f)``, i.e.
         ``(I + Δt C G) f = f_s − C J (v + Δt a_free)``. Points that would
-        pull are released and the system solved again; then each force is
-        clamped to its friction cone. ``acceleration`` (``a_free`` on entry)
-        gets ``M⁻¹ Jᵀ f`` added in place.
+        pull are released and points whose force leaves the friction cone
+        slide, each time solving again (:meth:`_coulomb_solve`).
+        ``acceleration`` (``a_free`` on entry) gets ``M⁻¹ Jᵀ f`` added in
+        place.
 
         If every point would pull, the coupling is to blame: the stick dampers
         ask a sliding foot for more tangential force than friction allows,

@@ -9,10 +9,12 @@ priorities as the jump goes (every change goes through the parameters):
 * ``compress``: a target objective (eq. 6–7) lowers the CM by
   ``jump_crouch_depth`` over ``jump_compress_duration_s``. For the jump the
   CM height objective ranks at ``jump_com_height_priority`` (default 3),
-  below the angular momentum, and the rest pose one level below it.
-  Ranked with the angular momentum (Table 1's level), the thrust traded
-  angular momentum for height and the robot left the ground pitching at
-  3 rad/s.
+  below the angular momentum, and the rest pose and the trunk one level
+  below it. Ranked with the angular momentum (Table 1's level), the thrust
+  traded angular momentum for height and the robot left the ground pitching
+  at 3 rad/s. With the trunk held upright above it, lowering the CM while
+  the angular momentum is damped left only the arms to move (they swung past
+  their limits, or stalled at them); the trunk leans instead.
 * ``thrust``: a target objective raises the CM toward the standing pose's
   height (legs straight) at ``jump_takeoff_speed`` (eq. 7's ẏ_T, held after
   T), with vertical reference angular momentum ``jump_twist_angular_momentum``
