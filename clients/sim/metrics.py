@@ -84,16 +84,7 @@ def _foot_slip_and_rotation(record: RunRecord) -> tuple[float, float]:
     frames = [model.getFrameId(contact.frame) for contact in record.welcome.contacts]
     anchors: list[pin.SE3 | None] = [None] * len(frames)
     slip_m = rotation_rad = 0.0
-    # The controller's supports, carried over the ticks without diagnostics (the
-    # client's flags where the record has no commands).
-    supports = record.contact_flags
-    if record.commands:
-        supports, current = [], record.contact_flags[0]
-        for command in record.commands:
-            if command.diagnostics is not None:
-                current = command.diagnostics.supports
-            supports.append(current)
-    for state, flags in zip(record.states, supports, strict=True):
+    for state, flags in zip(record.states, _controller_supports(record), strict=True):
         base = [state.position_base_in_world, state.orientation_base_in_world_xyzw]
         q = np.concatenate([*base, state.joint_position])
         pin.framesForwardKinematics(model, data, q)

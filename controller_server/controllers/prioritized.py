@@ -342,12 +342,19 @@ class PrioritizedController(Controller):
         if "behavior" in params:
             jump, self._jump = self._jump, None
             if jump is not None and jump.state != "done":
-                super().set_params(jump.saved)
-                self._derived = {}
+                self._set_behavior_params(jump.saved)
             walk, self._walk = self._walk, None
             if walk is not None:
-                super().set_params(walk.saved)
-                self._derived = {}
+                self._set_behavior_params(walk.saved)
+
+    def _set_behavior_params(self, changes: Mapping[str, Any]) -> None:
+        """Set a behaviour's parameter changes (or put them back) as they are.
+
+        Unlike :meth:`set_params`, a ``behavior`` here ends nothing and a ``com_height``
+        starts no target objective (the jump starts its own).
+        """
+        super().set_params(changes)
+        self._derived = {}
 
     def _validate(self, key: str, value: Any) -> Any:
         validated = super()._validate(key, value)
@@ -473,8 +480,7 @@ class PrioritizedController(Controller):
         observation = self._observation(control_input, terms)
         changes = self._jump.update(observation, p)
         if changes:
-            super().set_params(changes)
-            self._derived = {}
+            self._set_behavior_params(changes)
             if "com_height" in changes:
                 self._pending_height_change = True
 
@@ -535,8 +541,7 @@ class PrioritizedController(Controller):
                 offset = com[:2] + (acceleration + damping * com_velocity[:2]) / stiffness
                 changes["com_offset_xy"] = np.clip(offset - centroid, -10.0, 10.0).tolist()
         if changes:
-            super().set_params(changes)
-            self._derived = {}
+            self._set_behavior_params(changes)
 
     @property
     def behavior_state(self) -> str:
