@@ -42,6 +42,21 @@ priorities as the jump goes (every change goes through the parameters):
 * ``done``: every weight, priority, gain and mask is back to its value
   before the jump; the robot keeps standing in the pose it jumped from.
 
+A twisting jump can twist its body in the air too (``jump_flight_twist``,
+0 by default): from take-off the spine (the ball joints that carry the arms
+and head) turns the upper body that far behind the pelvis about the
+vertical, half on each spine joint; with the vertical angular momentum
+conserved, the pelvis and the legs turn further the twist's way. And from
+the top of the flight (``descent``) the legs take back the rest pose: it
+unwinds the twist the thrust left in the knees and ankles (the feet turn on
+to the pelvis's heading) and they land less bent. After touch-down the
+rest pose untwists the spine as the upper body's remaining spin catches up.
+Held in the take-off pose instead, the thesis humanoid's half turn reached
+about 140°: more angular momentum before take-off than L_r 11 rocked a
+sole onto its corners (the twist asked more yaw moment than the soles'
+friction gives), and in MuJoCo a shin touched the floor at landings with
+the legs still twisted.
+
 E_ankle (``ankle``: the feet at their take-off offset from the CM, and
 flat) is on in flight at ``jump_ankle_weight``, 0 by default: on the
 thesis and revolute humanoids it turned the body in the air (the rigid
@@ -54,6 +69,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import pinocchio as pin
 
 from controller_server.behaviors.observation import Observation
 from controller_server.controllers.base import ParamSpec
@@ -100,6 +116,14 @@ JUMP_PARAMETERS: dict[str, ParamSpec] = {
         minimum=-1e3,
         maximum=1e3,
         doc="jump: vertical L_r during `thrust` (kg·m²/s); non-zero twists the jump",
+    ),
+    "jump_flight_twist": ParamSpec(
+        0.0,
+        minimum=0.0,
+        maximum=2.0,
+        doc="jump: in flight the spine turns the upper body this far behind the pelvis, the "
+        "twist's way, and from the top of the flight the legs take back the rest pose (rad, "
+        "ball-joint spines); 0 = the take-off pose throughout the flight",
     ),
     "jump_com_height_priority": ParamSpec(
         3,
@@ -165,6 +189,8 @@ class StandingJump:
             landing recovers.
         standing_com_height: The robot's standing pose's CM height above the
             ground (m): legs straight, where the thrust aims.
+        model: The robot's model: its spine (:func:`spine_joints`) twists in
+            flight (``jump_flight_twist``); ``None``: no spine.
 
     Attributes:
         state: The current state (:data:`JUMP_STATES`).
@@ -173,7 +199,11 @@ class StandingJump:
     """
 
     def __init__(
-        self, params: Mapping[str, Any], joint_position: np.ndarray, standing_com_height: float
+        self,
+        params: Mapping[str, Any],
+        joint_position: np.ndarray,
+        standing_com_height: float,
+        model: pin.Model | None = None,
     ):
         self.saved = {key: _copy(params[key]) for key in _CHANGED}
         """The parameters the jump changes, as they were: ``done`` puts them back."""
@@ -182,6 +212,7 @@ class StandingJump:
         self._reach = float(standing_com_height)
         self.state = "stand"
         self._rest_pose = [float(x) for x in joint_position]
+        self._spine = [] if model is None else spine_joints(model)
         self._since_s: float | None = None
         self.ankle_offsets: np.ndarray | None = None
         self.foot_rotations: np.ndarray | None = None
@@ -250,9 +281,14 @@ class StandingJump:
                 support_mask=[0.0] * len(o.touching),
                 # The legs keep the pose they leave in: the crouch would tuck them while
                 # the feet still push (measured: the torques saturated).
-                reference_joint_position=[float(x) for x in o.joint_position],
+                reference_joint_position=self._twisted([float(x) for x in o.joint_position], p),
             )
         if self.state == "ascent" and not rising:
+            if p["jump_flight_twist"] > 0.0:
+                # The legs unwind the thrust's twist and straighten a little to land.
+                return self._enter(
+                    o, "descent", reference_joint_position=self._twisted(self._rest_pose, p)
+                )
             self._enter(o, "descent")
         if self.state in ("ascent", "descent") and airborne and not self._left_ground:
             # In the air: the ankles keep the offset from the CM they left the ground with
@@ -309,10 +345,42 @@ class StandingJump:
             return self._enter(o, "done", **restored)
         return {}
 
+    def _twisted(self, pose: list[float], params: Mapping[str, Any]) -> list[float]:
+        """``pose``, its spine turning the upper body ``jump_flight_twist`` behind the pelvis."""
+        twist = params["jump_flight_twist"] * np.sign(params["jump_twist_angular_momentum"])
+        pose = list(pose)
+        for start in self._spine:
+            # Each spine joint turns its child about its parent's vertical.
+            pose[start : start + 4] = _turned(pose[start : start + 4], -twist / len(self._spine))
+        return pose
+
     def _enter(self, observation: Observation, state: str, **changes: Any) -> dict[str, Any]:
         self.state = state
         self._since_s = observation.time_s
         return changes
+
+
+def spine_joints(model: pin.Model) -> list[int]:
+    """Wire indices (of their xyzw) of the spine: the ball joints, root excluded, that branch.
+
+    A joint branches when two or more end joints (leaves) hang from it: on the thesis
+    humanoid ``lower_back`` and ``upper_back`` (each carries the neck and both arms); a
+    leg or an arm holds one end joint only.
+    """
+    leaves = [j for j in range(1, model.njoints) if not any(p == j for p in model.parents)]
+    spine = []
+    for j in range(2, model.njoints):
+        if model.joints[j].nq != 4 or model.joints[j].nv != 3:
+            continue
+        below = 0
+        for leaf in leaves:
+            k = leaf
+            while k > j:
+                k = model.parents[k]
+            below += k == j
+        if below >= 2:
+            spine.append(model.joints[j].idx_q - 7)
+    return spine
 
 
 def _feet_heading(orientations: np.ndarray) -> float:

@@ -476,7 +476,9 @@ class PrioritizedController(Controller):
         """Advance the jump's state machine (§5) and apply what it sets at this tick."""
         p = self._params
         if self._jump is None:
-            self._jump = StandingJump(p, control_input.q[7:], self.default_value("com_height"))
+            self._jump = StandingJump(
+                p, control_input.q[7:], self.default_value("com_height"), self.robot.model
+            )
         observation = self._observation(control_input, terms)
         changes = self._jump.update(observation, p)
         if changes:
