@@ -181,6 +181,14 @@ WALK_PARAMETERS: dict[str, ParamSpec] = {
         maximum=10,
         doc="walk: priority of `pose` while walking (`swing` keeps its own priority)",
     ),
+    "walk_pose_weight": ParamSpec(
+        1.0,
+        minimum=0.0,
+        maximum=1e6,
+        doc="walk: α of `pose` while walking, ranked with `com_height` (`walk_push` sets 0.01: "
+        "at 1, in MuJoCo, the rest pose outweighed the CM height after a push and the CM "
+        "sank step by step until the robot fell)",
+    ),
     "walk_com_height_weight": ParamSpec(
         1.0,
         minimum=0.0,
@@ -217,6 +225,7 @@ _CHANGED = (
     "reference_trunk_orientation_xyzw",
     "reference_joint_position",
     "priority_pose",
+    "weight_pose",
     "priority_torque",
     "weight_com_height",
     "weight_angular_momentum",
@@ -397,6 +406,7 @@ class Walk:
         selection = np.where(self._arm_dofs, 1.0, 0.0)
         changes: dict[str, Any] = {
             "priority_pose": p["walk_pose_priority"],
+            "weight_pose": p["walk_pose_weight"],
             "weight_com_height": p["walk_com_height_weight"],
             "priority_com_height": p["walk_com_height_priority"],
             "weight_angular_momentum": p["walk_angular_momentum_weight"],
