@@ -65,6 +65,7 @@ def make_backend(scenario: Scenario) -> PhysicsBackend:
         scenario.friction_coefficient,
         contacts=scenario.contacts,
         keyframe=scenario.keyframe,
+        mujoco_contact_time_constant_s=scenario.mujoco_contact_time_constant_s,
     )
 
 
@@ -76,8 +77,13 @@ def physics_backend(
     *,
     contacts: list[ContactSpec] | None = None,
     keyframe: str | None = None,
+    mujoco_contact_time_constant_s: float | None = None,
 ) -> PhysicsBackend:
-    """A backend by name (``reference`` or ``mujoco``) for ``model``, at a rate and friction."""
+    """A backend by name (``reference`` or ``mujoco``) for ``model``, at a rate and friction.
+
+    ``mujoco_contact_time_constant_s`` is MuJoCo's floor contact time constant (``None``: the
+    model's); the reference simulator has its own penalty contact and ignores it.
+    """
     options: dict[str, Any] = {
         "friction_coefficient": friction_coefficient,
         "timestep_s": 1.0 / physics_rate_hz,
@@ -87,7 +93,9 @@ def physics_backend(
     if backend == "mujoco":
         from clients.sim.mujoco_backend import MujocoBackend
 
-        return MujocoBackend(model, **options)
+        return MujocoBackend(
+            model, contact_time_constant_s=mujoco_contact_time_constant_s, **options
+        )
     from clients.sim.reference import ReferenceBackend
 
     return ReferenceBackend(model, **options)

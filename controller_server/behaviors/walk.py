@@ -48,6 +48,12 @@ reach (``walk_max_step_length``, between :data:`MIN_WIDTH_FRACTION` of the
 standing width and ``walk_max_step_width``, so the legs do not cross).
 Turning: the heading ``ψ`` turns at ``walk_turn_rate``; ``b`` and the swing
 foot's yaw follow it, and so does the trunk's reference.
+Cadence: a faster walk takes quicker steps, not only longer ones. Above the
+speed at which a step of ``T_swing + T_double`` is ``walk_step_length`` long,
+the swing shortens to keep the step at that length (down to
+:data:`MIN_SWING_S`). With the cadence fixed, at 0.8 m/s the steps grew to
+0.5 m: in double support the trailing leg stretched straight, the CM sank, and
+the stance knee folded under saturated torques.
 
 State-independent objectives (§6.2, Table 2): the trunk upright (``trunk``,
 leaning ``walk_trunk_lean`` forward), the angular momentum damped
@@ -92,6 +98,8 @@ MIN_WIDTH_FRACTION = 0.7
 """Footholds are at least this fraction of the standing width apart, sideways."""
 STOP_SPEED = 0.1
 """With a zero command, the walk stops once the CM moves forward slower than this (m/s)."""
+MIN_SWING_S = 0.25
+"""The cadence (``walk_step_length``) shortens a swing to no less than this (s)."""
 SHIFT_TOLERANCE_M = 0.01
 """``shift`` and ``stop`` end once the capture point is this close to where they drive it."""
 
@@ -114,6 +122,14 @@ WALK_PARAMETERS: dict[str, ParamSpec] = {
     ),
     "walk_swing_duration_s": ParamSpec(
         0.45, minimum=0.2, maximum=2.0, doc="walk: T, swing (single-support) duration (Table 2, s)"
+    ),
+    "walk_step_length": ParamSpec(
+        0.36,
+        minimum=0.05,
+        maximum=2.0,
+        doc="walk: the longest step the cadence plans for (m): above the speed at which a step "
+        "of `walk_swing_duration_s` + `walk_double_support_s` is this long, the swing "
+        "shortens (to at least 0.25 s), so faster walking takes quicker steps, not longer ones",
     ),
     "walk_double_support_s": ParamSpec(
         0.1, minimum=0.0, maximum=2.0, doc="walk: double support between two swings (s)"
@@ -181,14 +197,6 @@ WALK_PARAMETERS: dict[str, ParamSpec] = {
         maximum=10,
         doc="walk: priority of `pose` while walking (`swing` keeps its own priority)",
     ),
-    "walk_pose_weight": ParamSpec(
-        1.0,
-        minimum=0.0,
-        maximum=1e6,
-        doc="walk: α of `pose` while walking, ranked with `com_height` (`walk_push` sets 0.01: "
-        "at 1, in MuJoCo, the rest pose outweighed the CM height after a push and the CM "
-        "sank step by step until the robot fell)",
-    ),
     "walk_com_height_weight": ParamSpec(
         1.0,
         minimum=0.0,
@@ -225,7 +233,6 @@ _CHANGED = (
     "reference_trunk_orientation_xyzw",
     "reference_joint_position",
     "priority_pose",
-    "weight_pose",
     "priority_torque",
     "weight_com_height",
     "weight_angular_momentum",
@@ -406,7 +413,6 @@ class Walk:
         selection = np.where(self._arm_dofs, 1.0, 0.0)
         changes: dict[str, Any] = {
             "priority_pose": p["walk_pose_priority"],
-            "weight_pose": p["walk_pose_weight"],
             "weight_com_height": p["walk_com_height_weight"],
             "priority_com_height": p["walk_com_height_priority"],
             "weight_angular_momentum": p["walk_angular_momentum_weight"],
@@ -479,7 +485,8 @@ class Walk:
     ) -> dict[str, Any]:
         """The other foot leaves the supports and swings (E_swing on)."""
         foot = 1 - self._stance
-        rotation = _yaw_rotation(self._heading + p["walk_turn_rate"] * p["walk_swing_duration_s"])
+        duration_s = self._swing_duration_s(p)
+        rotation = _yaw_rotation(self._heading + p["walk_turn_rate"] * duration_s)
         target = centers[foot].copy()
         target[2] = o.ground_height
         self.swing = SwingTarget(
@@ -488,7 +495,7 @@ class Walk:
             orientation_target_in_world=rotation,
             step_height=p["walk_step_height"],
             start_s=o.time_s,
-            duration_s=p["walk_swing_duration_s"],
+            duration_s=duration_s,
         )
         mask = [float(x) for x in self.saved["support_mask"]]
         mask[foot] = 0.0
@@ -509,7 +516,7 @@ class Walk:
         heading = self._heading + p["walk_turn_rate"] * left_s
         r = stance_center[:2]
         capture_end = r + (capture - r) * math.exp(omega * left_s)
-        cycle = p["walk_swing_duration_s"] + p["walk_double_support_s"]
+        cycle = swing.duration_s + p["walk_double_support_s"]
         foothold = capture_end - self._offset(p, omega, foot, cycle, heading)
         # Within reach, on its own side of the stance foot.
         forward, lateral = _direction(heading), _direction(heading + 0.5 * math.pi)
@@ -537,6 +544,21 @@ class Walk:
             start_s=swing.start_s,
             duration_s=swing.duration_s,
         )
+
+    def _swing_duration_s(self, p: Mapping[str, Any]) -> float:
+        """``T`` of the next swing: ``walk_swing_duration_s``, shortened at speed (cadence).
+
+        At the planned speed ``v`` a step of period ``T + T_double`` is ``v (T + T_double)``
+        long; above ``walk_step_length`` the swing shortens to keep it there, down to
+        :data:`MIN_SWING_S`. Longer steps at the same cadence stretched the trailing leg
+        straight in double support, and the CM sank until the stance knee folded (0.8 m/s).
+        """
+        nominal = float(p["walk_swing_duration_s"])
+        speed = abs(self._speed)
+        if speed <= 0.0:
+            return nominal
+        shortened = p["walk_step_length"] / speed - p["walk_double_support_s"]
+        return float(min(nominal, max(MIN_SWING_S, shortened)))
 
     def _offset(
         self,
