@@ -548,10 +548,11 @@ class Walk:
     def _swing_duration_s(self, p: Mapping[str, Any]) -> float:
         """``T`` of the next swing: ``walk_swing_duration_s``, shortened at speed (cadence).
 
-        At the planned speed ``v`` a step of period ``T + T_double`` is ``v (T + T_double)``
-        long; above ``walk_step_length`` the swing shortens to keep it there, down to
-        :data:`MIN_SWING_S`. Longer steps at the same cadence stretched the trailing leg
-        straight in double support, and the CM sank until the stance knee folded (0.8 m/s).
+        At the commanded speed ``v`` (as ``walk_acceleration`` lets it change) a step of
+        period ``T + T_double`` is ``v (T + T_double)`` long; above ``walk_step_length`` the
+        swing shortens to keep it there, down to :data:`MIN_SWING_S`. Longer steps at the same
+        cadence stretched the trailing leg straight in double support, and the CM sank until
+        the stance knee folded (0.8 m/s).
         """
         nominal = float(p["walk_swing_duration_s"])
         speed = abs(self._speed)
