@@ -72,3 +72,18 @@ class IndependentDynamics:
             float(np.abs(from_points - from_wrenches).max()) if point_forces.any() else 0.0
         )
         return float(np.abs(generalized).max())
+
+
+REVOLUTE_CROUCH = {
+    f"{side}_{joint}": [angle]
+    for side in ("left", "right")
+    for joint, angle in (("hip_pitch", -0.3), ("knee", 0.6), ("ankle_pitch", -0.3))
+}
+"""The revolute humanoid's legs slightly bent (hips and ankles −0.3 rad, knees 0.6 rad), by its
+own joint names: the jump and walk scenarios name the thesis humanoid's."""
+
+
+def base_tilt_deg(state) -> float:
+    """Angle between a simulator state's base z axis and the world's vertical (degrees)."""
+    rotation = pin.Quaternion(np.array(state.orientation_base_in_world_xyzw)).toRotationMatrix()
+    return float(np.degrees(np.arccos(np.clip(rotation[2, 2], -1.0, 1.0))))

@@ -367,20 +367,18 @@ def spine_joints(model: pin.Model) -> list[int]:
     humanoid ``lower_back`` and ``upper_back`` (each carries the neck and both arms); a
     leg or an arm holds one end joint only.
     """
-    leaves = [j for j in range(1, model.njoints) if not any(p == j for p in model.parents)]
-    spine = []
-    for j in range(2, model.njoints):
-        if model.joints[j].nq != 4 or model.joints[j].nv != 3:
-            continue
-        below = 0
-        for leaf in leaves:
-            k = leaf
-            while k > j:
-                k = model.parents[k]
-            below += k == j
-        if below >= 2:
-            spine.append(model.joints[j].idx_q - 7)
-    return spine
+    parents = list(model.parents)
+    leaves_below = [0] * model.njoints
+    for leaf in set(range(1, model.njoints)) - set(parents):
+        joint = leaf
+        while joint > 0:  # Pinocchio numbers a parent before its children
+            leaves_below[joint] += 1
+            joint = parents[joint]
+    return [
+        model.joints[j].idx_q - 7
+        for j in range(2, model.njoints)
+        if model.joints[j].nq == 4 and model.joints[j].nv == 3 and leaves_below[j] >= 2
+    ]
 
 
 def _feet_heading(orientations: np.ndarray) -> float:

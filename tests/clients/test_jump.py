@@ -7,7 +7,6 @@ past the shoulders' in the crouch). Twisting jumps turn the quarter turn they ar
 """
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 from clients.sim.metrics import compute_metrics
@@ -15,19 +14,9 @@ from clients.sim.runner import RunRecord, run_scenario
 from clients.sim.scenario import load_scenario
 from controller_server.features.joint_limits import default_joint_limits
 from controller_server.models import load_robot_model
+from tests.helpers import REVOLUTE_CROUCH, base_tilt_deg
 
 pytestmark = pytest.mark.e2e
-
-REVOLUTE_CROUCH = {
-    f"{side}_{joint}": [angle]
-    for side in ("left", "right")
-    for joint, angle in (("hip_pitch", -0.3), ("knee", 0.6), ("ankle_pitch", -0.3))
-}
-
-
-def tilt_deg(state) -> float:
-    rotation = pin.Quaternion(np.array(state.orientation_base_in_world_xyzw)).toRotationMatrix()
-    return float(np.degrees(np.arccos(np.clip(rotation[2, 2], -1.0, 1.0))))
 
 
 def worst_limit_excess_rad(record: RunRecord) -> float:
@@ -52,7 +41,7 @@ def assert_landed_standing(record: RunRecord, metrics: dict) -> None:
     assert metrics["jump"]["landed"]
     start, end = record.states[0], record.states[-1]
     assert abs(end.position_base_in_world[2] - start.position_base_in_world[2]) < 0.01
-    assert tilt_deg(end) < 3.0
+    assert base_tilt_deg(end) < 3.0
     assert np.linalg.norm(end.linear_velocity_base_in_world) < 0.05
 
 

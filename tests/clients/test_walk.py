@@ -8,27 +8,15 @@ Each run is a few simulated seconds (CI time); the 20 m walk is the built-in sce
 """
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 from clients.sim.metrics import walking_metrics
 from clients.sim.plots import plot_walk_paths
 from clients.sim.runner import RunRecord, run_scenario
 from clients.sim.scenario import ParamChange, load_scenario
+from tests.helpers import REVOLUTE_CROUCH, base_tilt_deg
 
 pytestmark = pytest.mark.e2e
-
-REVOLUTE_CROUCH = {
-    f"{side}_{joint}": [angle]
-    for side in ("left", "right")
-    for joint, angle in (("hip_pitch", -0.3), ("knee", 0.6), ("ankle_pitch", -0.3))
-}
-"""The revolute humanoid's joints named as its own (the scenario's are the thesis humanoid's)."""
-
-
-def tilt_deg(state) -> float:
-    rotation = pin.Quaternion(np.array(state.orientation_base_in_world_xyzw)).toRotationMatrix()
-    return float(np.degrees(np.arccos(np.clip(rotation[2, 2], -1.0, 1.0))))
 
 
 def speed_between(record: RunRecord, start_s: float, end_s: float) -> float:
@@ -54,7 +42,7 @@ def supports_at(record: RunRecord, time_s: float) -> list[bool]:
 
 def assert_walked_upright(record: RunRecord) -> dict:
     assert not record.fell, record.fall_reason
-    assert max(tilt_deg(state) for state in record.states) < 8.0
+    assert max(base_tilt_deg(state) for state in record.states) < 8.0
     metrics = walking_metrics(record)
     assert metrics["foot_slip_m"] < 0.02, metrics
     return metrics
