@@ -45,6 +45,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     from clients.bridge.config import BridgeConfigError
     from clients.bridge.loop import BridgeStartError
     from clients.client import ServerError, ServerTimeout
+    from clients.pool import ClusterUnavailable
     from clients.sim.errors import ScenarioError, UnsupportedModel
     from clients.sim.output import OutputBusy
     from controller_server.models.description import DescriptionError
@@ -59,6 +60,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
         | UnsupportedModel
         | InvalidEndpoint
         | ServerTimeout
+        | ClusterUnavailable
         | OutputBusy
         | BridgeConfigError
         | BridgeStartError

@@ -17,8 +17,11 @@ __all__ = ["add_parsers"]
 
 
 def _sim(args: argparse.Namespace) -> int:
-    from clients.sim.app import SWEEP_DIRECTIONS, run_scenarios, server_endpoint, sweep_controllers
+    from clients.pool import RunPool, default_workers
+    from clients.sim.app import run_scenarios
+    from clients.sim.output import OutputDirectory
     from clients.sim.scenario import PushSpec
+    from clients.sim.sweep import SWEEP_DIRECTIONS, sweep_controllers
 
     overrides = {}
     if args.backend:
@@ -35,6 +38,7 @@ def _sim(args: argparse.Namespace) -> int:
         overrides["contacts"] = [{"name": frame, "frame": frame} for frame in args.contacts]
     check_endpoint_option("--connect", args.connect)
     curve = curve_keys(args)
+    workers = default_workers() if args.workers is None else args.workers
     if not args.sweep_push:
         record_dir = Path(args.record) if args.record else None
         reports = run_scenarios(
@@ -45,6 +49,8 @@ def _sim(args: argparse.Namespace) -> int:
             curve=curve,
             record_dir=record_dir,
             series=args.series,
+            workers=workers,
+            dask=args.dask,
         )
         return 1 if any(report["fell"] or not report["complete"] for report in reports) else 0
     push = PushSpec(
@@ -56,9 +62,22 @@ def _sim(args: argparse.Namespace) -> int:
     directions = SWEEP_DIRECTIONS
     if args.push_direction:
         directions = {f"({x:g}, {y:g}, {z:g})": (x, y, z) for x, y, z in args.push_direction}
-    with server_endpoint(args.connect) as endpoint:
-        sweep_controllers(args.scenarios[0], push, directions, endpoint, overrides, curve=curve)
+    output_dir = Path(args.output)
+    with (
+        OutputDirectory(output_dir),
+        RunPool(workers, args.dask, args.connect, curve) as pool,
+    ):
+        sweep_controllers(
+            args.scenarios[0], push, directions, pool, overrides, output_dir=output_dir
+        )
     return 0
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not a positive number of workers")
+    return value
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -141,10 +160,28 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="use a running server at ENDPOINT (tcp://HOST:PORT) instead of starting one",
     )
     sim.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="run the sweep's trials, or the scenarios, on N local worker processes sharing "
+        "one server (default: one per core; 1 runs them one by one in this process, with a "
+        "progress bar per tick); same results for any N",
+    )
+    sim.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="run them on the Dask cluster whose scheduler is at ADDRESS (tcp://HOST:8786; "
+        "needs `pip install 'poise[dask]'`): against the --connect server if given (it must "
+        "be reachable from the Dask workers), else each Dask worker starts its own",
+    )
+    sim.add_argument(
         "--sweep-push",
         action="store_true",
         help="find by bisection the largest push each thesis ablation and the prioritized "
-        "controller survive, per direction (first scenario)",
+        "controller survive, per direction (first scenario); prints a table, writes "
+        "DIR/sweep_<scenario>.json (every trial) and DIR/sweep_<scenario>.png (survived/fell "
+        "over direction and force, a polar plot per controller)",
     )
     sim.add_argument(
         "--push-body",
