@@ -1,0 +1,120 @@
+"""Sweeps and scenario batteries on a pool: the same trials and results on 1 worker, 2 local
+worker processes and an in-process Dask cluster; one-line errors for a bad pool.
+
+The sweep is small on purpose: a 0.1 s push at 0.1 s, trials 0.6 s long, bisected from
+800 N to 100 N (4 trials per pair), from the front, for two controllers.
+"""
+
+import json
+
+import pytest
+
+from clients.pool import RunPool
+from clients.sim.app import run_scenarios
+from clients.sim.scenario import PushSpec
+from clients.sim.sweep import SWEEP_CONTROLLERS, sweep_controllers
+from controller_server.cli import main
+
+pytestmark = pytest.mark.e2e
+
+PUSH = PushSpec(body="chest", force_in_world_N=(1.0, 0.0, 0.0), start_s=0.1, duration_s=0.1)
+CONTROLLERS = {
+    label: SWEEP_CONTROLLERS[label] for label in ("tracking only", "prioritized (de Lasa 2010)")
+}
+
+
+def small_sweep(pool, output_dir=None):
+    sweep = sweep_controllers(
+        "stand",
+        PUSH,
+        {"from the front": (-1.0, 0.0, 0.0)},
+        pool,
+        {"duration_s": 0.5},
+        output_dir=output_dir,
+        controllers=CONTROLLERS,
+        max_force_N=800.0,
+        tolerance_N=100.0,
+        settle_s=0.4,
+        progress=False,
+    )
+    return {
+        label: {name: b.trials for name, b in row.items()}
+        for label, row in sweep.bisections.items()
+    }
+
+
+@pytest.fixture(scope="module")
+def serial(server):
+    """The small sweep in this process, one trial after the other."""
+    with RunPool(endpoint=server.endpoint) as pool:
+        return small_sweep(pool)
+
+
+def test_the_serial_sweep_bisects_to_the_tolerance(serial):
+    for row in serial.values():
+        (trials,) = row.values()
+        assert [force for force, _ in trials[:2]] == [800.0, 400.0]
+        assert len(trials) == 4  # 800 N, then halving a 800 N interval to 100 N
+        assert any(ok for _, ok in trials) and not all(ok for _, ok in trials)
+
+
+def test_two_local_workers_try_the_same_forces_with_the_same_outcomes(serial, tmp_path, capsys):
+    with RunPool(workers=2) as pool:  # its own server, two session workers
+        assert pool.capacity == 2 and not pool.in_process
+        assert small_sweep(pool, output_dir=tmp_path) == serial
+    printed = capsys.readouterr().out
+    assert "tracking only" in printed and f"picture: {tmp_path / 'sweep_stand.png'}" in printed
+    written = json.loads((tmp_path / "sweep_stand.json").read_text())
+    assert written["trials"]["tracking only"]["from the front"] == [
+        {"force_N": force, "survived": ok}
+        for force, ok in serial["tracking only"]["from the front"]
+    ]
+    assert (tmp_path / "sweep_stand.png").read_bytes().startswith(b"\x89PNG")
+
+
+def test_an_in_process_dask_cluster_gives_the_serial_results(serial):
+    """Two Dask workers in this process (threads), each with its own loopback server."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        with RunPool(dask=cluster.scheduler_address) as pool:
+            assert pool.capacity == 2
+            assert small_sweep(pool) == serial
+
+
+def test_a_battery_on_two_workers_reports_in_order_what_one_worker_reports(server, tmp_path):
+    names = ["stand", "head_push"]
+    overrides = {"duration_s": 0.3}
+    one = run_scenarios(names, tmp_path / "one", server.endpoint, overrides, progress=False)
+    two = run_scenarios(
+        names, tmp_path / "two", server.endpoint, overrides, progress=False, workers=2
+    )
+    timing = {"real_time_factor", "server_compute_p50_ms", "plot"}  # wall-clock, or paths
+
+    def deterministic(reports):
+        return [{k: v for k, v in r.items() if k not in timing} for r in reports]
+
+    assert [r["scenario"] for r in two] == names
+    assert deterministic(two) == deterministic(one)
+    assert json.loads((tmp_path / "two" / "report.json").read_text()) == two
+    assert (tmp_path / "two" / "head_push.png").is_file()
+
+
+def test_a_dask_scheduler_that_does_not_answer_is_one_line(monkeypatch, capsys, tmp_path):
+    pytest.importorskip("distributed")
+    import clients.pool
+
+    monkeypatch.setattr(clients.pool, "DASK_CONNECT_TIMEOUT_S", 1.0)
+    argv = ["sim", "stand", "--sweep-push", "--output", str(tmp_path)]
+    assert main([*argv, "--dask", "tcp://127.0.0.1:9"]) == 2
+    error = capsys.readouterr().err
+    assert error.startswith("poise sim: --dask tcp://127.0.0.1:9: no Dask scheduler answered")
+    assert error.count("\n") == 1 and "Traceback" not in error
+
+
+def test_workers_must_be_positive(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["sim", "stand", "--workers", "0"])
+    assert exit_info.value.code == 2
+    assert "0 is not a positive number of workers" in capsys.readouterr().err
