@@ -46,7 +46,8 @@ def run_scenarios(
     """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table.
 
     The scenarios run on a :class:`~clients.pool.RunPool` of ``workers``
-    local processes, or on the Dask cluster at ``dask``; the report, plots
+    local processes (no more than there are scenarios), or on the Dask
+    cluster at ``dask``; the report, plots
     and table are made here, in the order of ``names`` whatever the order the
     runs finish in. ``report.json`` is rewritten after every scenario, so a run
     killed half-way leaves the report of what ran; in this process
@@ -69,7 +70,7 @@ def run_scenarios(
     label = scenarios[0].name if len(scenarios) == 1 else "scenarios"
     with (
         OutputDirectory(output_dir) as output,
-        RunPool(workers, dask, endpoint, curve) as pool,
+        RunPool(min(workers, len(scenarios)), dask, endpoint, curve) as pool,
         ProgressBar(label, enabled=progress) as bar,
     ):
         tasks = _ScenarioTasks(scenarios, output, pool, bar, record_dir, series)

@@ -21,7 +21,7 @@ def _sim(args: argparse.Namespace) -> int:
     from clients.sim.app import run_scenarios
     from clients.sim.output import OutputDirectory
     from clients.sim.scenario import PushSpec
-    from clients.sim.sweep import SWEEP_DIRECTIONS, sweep_controllers
+    from clients.sim.sweep import SWEEP_CONTROLLERS, SWEEP_DIRECTIONS, sweep_controllers
 
     overrides = {}
     if args.backend:
@@ -63,9 +63,10 @@ def _sim(args: argparse.Namespace) -> int:
     if args.push_direction:
         directions = {f"({x:g}, {y:g}, {z:g})": (x, y, z) for x, y, z in args.push_direction}
     output_dir = Path(args.output)
+    pairs = len(SWEEP_CONTROLLERS) * len(directions)  # no more workers than bisections
     with (
         OutputDirectory(output_dir),
-        RunPool(workers, args.dask, args.connect, curve) as pool,
+        RunPool(min(workers, pairs), args.dask, args.connect, curve) as pool,
     ):
         sweep_controllers(
             args.scenarios[0], push, directions, pool, overrides, output_dir=output_dir
@@ -164,9 +165,10 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         type=_positive_int,
         default=None,
         metavar="N",
-        help="run the sweep's trials, or the scenarios, on N local worker processes sharing "
-        "one server (default: one per core; 1 runs them one by one in this process, with a "
-        "progress bar per tick); same results for any N",
+        help="run the sweep's bisections, or the scenarios, on N local worker processes "
+        "sharing one server (default: one per core, no more than there are bisections or "
+        "scenarios; 1: one by one in this process, a scenario's progress bar moving with its "
+        "ticks); the same results for any N",
     )
     sim.add_argument(
         "--dask",
