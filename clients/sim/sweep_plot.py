@@ -99,6 +99,11 @@ def plot_sweep(sweep: Sweep, path: Path) -> None:
         ticks = sorted(set(azimuths.values()))
         names = ["\n".join(n for n in sweep.directions if azimuths[n] == a) for a in ticks]
         ax.set_xticks(ticks, names, fontsize=8)
+        for angle, text in zip(ticks, ax.get_xticklabels(), strict=True):
+            across = -math.sin(angle)  # screen x of the direction: +x is up, +y to the left
+            text.set_horizontalalignment(
+                "right" if across < -0.3 else "left" if across > 0.3 else "center"
+            )
         ax.set_title(label, fontsize=10, pad=18)
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), fontsize=7, ncol=2)
     push = sweep.push
