@@ -47,17 +47,23 @@ if TYPE_CHECKING:
     from distributed import Client
 
 __all__ = [
+    "BATCH_DEADLINE_S",
     "DASK_CONNECT_TIMEOUT_S",
     "ClusterUnavailable",
     "RunPool",
     "Task",
     "TaskSource",
     "WorkerServer",
+    "batch_server",
     "default_workers",
 ]
 
 DASK_CONNECT_TIMEOUT_S = 10.0
 """How long to wait for a Dask scheduler to answer."""
+BATCH_DEADLINE_S = 10.0
+"""``--deadline`` of the servers a pool starts (``poise serve``'s default is 0.5 s): on a busy
+machine a tick answered late would be ``DEADLINE_EXCEEDED``, which a run reads as a fall, so a
+batch's results would depend on the load. A run that hangs still ends (the client's timeout)."""
 WORKER_SERVER_PLUGIN = "poise-worker-server"
 
 
@@ -145,7 +151,7 @@ class RunPool:
                 self.capacity = max(1, sum(self._client.nthreads().values()))
             else:
                 if self.endpoint is None:
-                    self._server = ServerProcess(extra_args=["--workers", str(self.workers)])
+                    self._server = batch_server(self.workers)
                     self.endpoint = self._server.start().endpoint
                 if self.workers > 1:
                     self._executor = cf.ProcessPoolExecutor(
@@ -216,6 +222,16 @@ class RunPool:
                 source.finished(in_flight.pop(future), future.result())
 
 
+def batch_server(workers: int) -> ServerProcess:
+    """A loopback ``poise serve`` (not started) for ``workers`` clients at once.
+
+    One session worker per client, and a deadline of :data:`BATCH_DEADLINE_S`.
+    """
+    return ServerProcess(
+        extra_args=["--workers", str(max(1, workers)), "--deadline", f"{BATCH_DEADLINE_S:g}"]
+    )
+
+
 def _ignore_interrupts() -> None:
     """A local worker ignores the terminal's Ctrl-C: the parent stops it (no traceback each)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -276,8 +292,7 @@ class WorkerServer(_worker_plugin_base()):  # type: ignore[misc]
 
     def setup(self, worker: Any) -> None:
         """Start the worker's server."""
-        server = ServerProcess(extra_args=["--workers", str(max(1, worker.state.nthreads))])
-        self._servers[worker.address] = server.start()
+        self._servers[worker.address] = batch_server(worker.state.nthreads).start()
 
     def teardown(self, worker: Any) -> None:
         """Stop the worker's server."""

@@ -126,7 +126,7 @@ def test_push_sweep_bisects_each_direction_and_waits_for_the_robot_to_settle(
             limit = limits.get((scenario.controller, np.sign(force_x)), 200.0) * scale
             durations.add(scenario.duration_s)
             self.fell = abs(force_x) > limit
-            self.stopped = ""
+            self.stopped = self.fall_reason = ""
 
     monkeypatch.setattr(sweep_module, "run_scenario", Run)
     push = sweep_module.PushSpec(

@@ -6,6 +6,7 @@ The sweep is small on purpose: a 0.1 s push at 0.1 s, trials 0.6 s long, bisecte
 """
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -101,6 +102,42 @@ def test_a_battery_on_two_workers_reports_in_order_what_one_worker_reports(serve
     assert (tmp_path / "two" / "head_push.png").is_file()
 
 
+def test_a_trial_ended_by_a_missed_deadline_runs_again(monkeypatch, caplog):
+    """DEADLINE_EXCEEDED says the machine was busy, not that the robot fell."""
+    import clients.sim.sweep as sweep_module
+    from clients.client import ServerTimeout
+
+    outcomes = []
+
+    class Run:
+        def __init__(self, scenario, endpoint, curve=None):
+            self.stopped = ""
+            self.fell, self.fall_reason = outcomes.pop(0)
+
+    missed = (True, f"{sweep_module.DEADLINE_MISSED}: not served within the server's deadline")
+    monkeypatch.setattr(sweep_module, "run_scenario", Run)
+    scenario = sweep_module.trial_scenario(
+        sweep_module.load_scenario("stand"), PUSH, 100.0, settle_s=0.5
+    )
+    outcomes[:] = [missed, (False, "")]
+    assert sweep_module.push_survived(scenario, endpoint="tcp://unused")
+    assert "attempt 1 of 3" in caplog.text and not outcomes
+    outcomes[:] = [missed, (True, "base tilted past 60°")]
+    assert not sweep_module.push_survived(scenario, endpoint="tcp://unused")
+    outcomes[:] = [missed] * sweep_module.TRIAL_ATTEMPTS
+    with pytest.raises(ServerTimeout, match="missed its deadline in 3 attempts"):
+        sweep_module.push_survived(scenario, endpoint="tcp://unused")
+
+
+def test_the_sweep_gives_the_prioritized_controller_time_for_its_second_tries():
+    """Its 20 ms QP budget would make a trial near the boundary depend on the load."""
+    from clients.sim.sweep import TRIAL_QP_TIME_BUDGET_S, sweep_bases
+
+    bases = sweep_bases("stand", controllers=CONTROLLERS)
+    assert bases["prioritized (de Lasa 2010)"].params["qp_time_budget_s"] == TRIAL_QP_TIME_BUDGET_S
+    assert "qp_time_budget_s" not in bases["tracking only"].params
+
+
 def test_a_dask_scheduler_that_does_not_answer_is_one_line(monkeypatch, capsys, tmp_path):
     pytest.importorskip("distributed")
     import clients.pool
@@ -118,3 +155,59 @@ def test_workers_must_be_positive(capsys):
         main(["sim", "stand", "--workers", "0"])
     assert exit_info.value.code == 2
     assert "0 is not a positive number of workers" in capsys.readouterr().err
+
+
+def test_sigterm_stops_a_battery_on_workers_and_its_worker_processes(server, tmp_path):
+    """The parent stops at once (exit 130, one line), its worker processes with it."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    scenario = tmp_path / "long_stand.toml"
+    scenario.write_text('name = "long_stand"\nmodel = "thesis_humanoid"\nduration_s = 60.0\n')
+    short = tmp_path / "short_stand.toml"
+    short.write_text('name = "short_stand"\nmodel = "thesis_humanoid"\nduration_s = 0.1\n')
+    output = tmp_path / "out"
+    options = ["--workers", "2", "--connect", server.endpoint, "--output", str(output)]
+    child = subprocess.Popen(
+        [sys.executable, "-m", "controller_server.cli", "sim", str(short), str(scenario), *options],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (output / "report.json").exists():
+            time.sleep(0.2)  # the short scenario is done: the long one runs
+        workers = descendants(child.pid)
+        assert workers, "no worker processes"
+        child.send_signal(signal.SIGTERM)
+        stdout, stderr = child.communicate(timeout=60)
+    finally:
+        child.kill()
+    assert child.returncode == 130, stderr
+    assert stderr.strip() == "poise sim: interrupted"
+    (report,) = json.loads((output / "report.json").read_text())
+    assert report["scenario"] == "short_stand" and report["complete"]
+    assert "short_stand" in stdout
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(alive(pid) for pid in workers):
+        time.sleep(0.1)
+    assert not [pid for pid in workers if alive(pid)]
+
+
+def descendants(pid):
+    """The processes under ``pid`` (Linux /proc)."""
+    found = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for child in (task / "children").read_text().split():
+            found += [int(child), *descendants(int(child))]
+    return found
+
+
+def alive(pid):
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"
+    except (FileNotFoundError, IndexError):
+        return False
