@@ -31,9 +31,11 @@ change what a run computes: the simulation is deterministic given its inputs.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import ctypes
 import multiprocessing
 import os
 import signal
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import TracebackType
@@ -65,6 +67,8 @@ BATCH_DEADLINE_S = 10.0
 machine a tick answered late would be ``DEADLINE_EXCEEDED``, which a run reads as a fall, so a
 batch's results would depend on the load. A run that hangs still ends (the client's timeout)."""
 WORKER_SERVER_PLUGIN = "poise-worker-server"
+PR_SET_PDEATHSIG = 1
+"""``prctl`` option (linux/prctl.h): the signal a process gets when its parent dies."""
 
 
 class ClusterUnavailable(PoiseError, ConnectionError):
@@ -157,7 +161,7 @@ class RunPool:
                     self._executor = cf.ProcessPoolExecutor(
                         self.workers,
                         mp_context=multiprocessing.get_context("spawn"),
-                        initializer=_ignore_interrupts,
+                        initializer=_start_worker,
                     )
                     self.capacity = self.workers
         except BaseException:
@@ -232,9 +236,18 @@ def batch_server(workers: int) -> ServerProcess:
     )
 
 
-def _ignore_interrupts() -> None:
-    """A local worker ignores the terminal's Ctrl-C: the parent stops it (no traceback each)."""
+def _start_worker() -> None:
+    """A local worker ignores the terminal's Ctrl-C: the parent stops it (no traceback each).
+
+    On Linux it also gets SIGTERM if the parent dies (``PR_SET_PDEATHSIG``), so a
+    ``poise sim`` killed outright leaves no worker running on.
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM))
+        if os.getppid() == 1:  # the parent died before prctl
+            os._exit(1)
 
 
 def _quietly(call: Callable[..., Any], *args: Any) -> None:

@@ -68,17 +68,20 @@ def run_scenarios(
     # Every scenario is checked before a server starts or a file is written.
     scenarios = [load_scenario(name, **(overrides or {})) for name in names]
     label = scenarios[0].name if len(scenarios) == 1 else "scenarios"
-    with (
-        OutputDirectory(output_dir) as output,
-        RunPool(min(workers, len(scenarios)), dask, endpoint, curve) as pool,
-        ProgressBar(label, enabled=progress) as bar,
-    ):
-        tasks = _ScenarioTasks(scenarios, output, pool, bar, record_dir, series)
-        try:
-            pool.run(tasks)
+    tasks: _ScenarioTasks | None = None
+    with OutputDirectory(output_dir) as output:
+        try:  # the pool sees the interrupt: it abandons what still runs
+            with (
+                RunPool(min(workers, len(scenarios)), dask, endpoint, curve) as pool,
+                ProgressBar(label, enabled=progress) as bar,
+            ):
+                tasks = _ScenarioTasks(scenarios, output, pool, bar, record_dir, series)
+                pool.run(tasks)
         except KeyboardInterrupt:
+            if tasks is None:
+                raise
             tasks.interrupted = True
-        reports = tasks.reports()
+    reports = tasks.reports()
     _print_table(reports)
     if tasks.interrupted:
         raise KeyboardInterrupt

@@ -157,9 +157,8 @@ def test_workers_must_be_positive(capsys):
     assert "0 is not a positive number of workers" in capsys.readouterr().err
 
 
-def test_sigterm_stops_a_battery_on_workers_and_its_worker_processes(server, tmp_path):
-    """The parent stops at once (exit 130, one line), its worker processes with it."""
-    import signal
+def start_battery(server, tmp_path):
+    """`poise sim` of a 0.1 s and a 60 s stand on 2 workers, once the short one is reported."""
     import subprocess
     import sys
     import time
@@ -176,11 +175,27 @@ def test_sigterm_stops_a_battery_on_workers_and_its_worker_processes(server, tmp
         stderr=subprocess.PIPE,
         text=True,
     )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (output / "report.json").exists():
+        time.sleep(0.2)  # the short scenario is done: the long one runs
+    return child, output, descendants(child.pid)
+
+
+def assert_gone(pids):
+    import time
+
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(alive(pid) for pid in pids):
+        time.sleep(0.1)
+    assert not [pid for pid in pids if alive(pid)]
+
+
+def test_sigterm_stops_a_battery_on_workers_and_its_worker_processes(server, tmp_path):
+    """The parent stops at once (exit 130, one line), its worker processes with it."""
+    import signal
+
+    child, output, workers = start_battery(server, tmp_path)
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and not (output / "report.json").exists():
-            time.sleep(0.2)  # the short scenario is done: the long one runs
-        workers = descendants(child.pid)
         assert workers, "no worker processes"
         child.send_signal(signal.SIGTERM)
         stdout, stderr = child.communicate(timeout=60)
@@ -191,10 +206,15 @@ def test_sigterm_stops_a_battery_on_workers_and_its_worker_processes(server, tmp
     (report,) = json.loads((output / "report.json").read_text())
     assert report["scenario"] == "short_stand" and report["complete"]
     assert "short_stand" in stdout
-    deadline = time.monotonic() + 10
-    while time.monotonic() < deadline and any(alive(pid) for pid in workers):
-        time.sleep(0.1)
-    assert not [pid for pid in workers if alive(pid)]
+    assert_gone(workers)
+
+
+def test_workers_of_a_killed_run_stop_too(server, tmp_path):
+    child, _, workers = start_battery(server, tmp_path)
+    child.kill()
+    child.communicate(timeout=60)
+    assert workers and child.returncode == -9
+    assert_gone(workers)
 
 
 def descendants(pid):
