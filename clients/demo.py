@@ -29,6 +29,7 @@ def run_demo(
     curve: CurveKeys | None = None,
     record_dir: Path | None = None,
     series: bool = False,
+    video: bool = False,
 ) -> int:
     """Run the push scenarios; exit code 0 if the robot stayed up in all of them, else 1."""
     if endpoint is None:
@@ -41,6 +42,9 @@ def run_demo(
         curve=curve,
         record_dir=record_dir,
         series=series,
+        video=video,
     )
     print(f"report: {output_dir / 'report.json'}; plots: {', '.join(r['plot'] for r in reports)}")
+    if video:
+        print(f"videos: {', '.join(r['video'] for r in reports if 'video' in r)}")
     return 1 if any(r["fell"] or not r["complete"] for r in reports) else 0

@@ -16,6 +16,9 @@ from clients.sim.plots import plot_run, plot_walk_paths
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import PushSpec, Scenario, load_scenario
 from clients.sim.series import save_series
+from clients.visual.gl import choose_headless_gl
+from clients.visual.track import track_of_run
+from clients.visual.video import write_video
 
 __all__ = [
     "ABLATIONS",
@@ -67,6 +70,7 @@ def run_scenarios(
     curve: CurveKeys | None = None,
     record_dir: Path | None = None,
     series: bool = False,
+    video: bool = False,
 ) -> list[dict[str, Any]]:
     """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table.
 
@@ -76,14 +80,19 @@ def run_scenarios(
     why, then Ctrl-C or SIGTERM stops the run (``KeyboardInterrupt``).
     With ``record_dir``, each scenario's conversation with the server is
     recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it); with
-    ``series``, its raw time series go to ``<name>.npz`` (:mod:`clients.sim.series`).
+    ``series``, its raw time series go to ``<name>.npz`` (:mod:`clients.sim.series`);
+    with ``video``, it is rendered to ``<name>.mp4`` (:mod:`clients.visual.video`).
 
     Raises:
         ScenarioError: A scenario cannot run (checked for all before the first runs).
         OutputBusy: Another run writes to ``output_dir``.
+        RenderingUnavailable: ``video`` on a machine where MuJoCo cannot render
+            offscreen (checked before anything runs).
     """
     # Every scenario is checked before a server starts or a file is written.
     scenarios = [load_scenario(name, **(overrides or {})) for name in names]
+    if video:
+        choose_headless_gl()
     reports: list[dict[str, Any]] = []
     with OutputDirectory(output_dir) as output, server_endpoint(endpoint) as address:
         for scenario in scenarios:
@@ -106,6 +115,10 @@ def run_scenarios(
                     metrics["series"] = str(
                         save_series(record, output_dir / f"{scenario.name}.npz")
                     )
+                if video:
+                    metrics["video"] = str(output_dir / f"{scenario.name}.mp4")
+                    with ProgressBar(f"{scenario.name} video", enabled=progress) as bar:
+                        write_video(track_of_run(record), metrics["video"], progress=bar)
             reports.append(metrics)
             output.write_report(reports)
             if record.stopped == "interrupted":

@@ -19,6 +19,7 @@ __all__ = [
     "as_usage_error",
     "check_endpoint_option",
     "curve_keys",
+    "prepare_video",
 ]
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
@@ -47,6 +48,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     from clients.client import ServerError, ServerTimeout
     from clients.sim.errors import ScenarioError, UnsupportedModel
     from clients.sim.output import OutputBusy
+    from clients.visual.gl import RenderingUnavailable
     from controller_server.models.description import DescriptionError
     from protocol.endpoints import InvalidEndpoint
     from protocol.errors import ErrorCode
@@ -63,7 +65,8 @@ def as_usage_error(exc: Exception) -> UsageError | None:
         | BridgeConfigError
         | BridgeStartError
         | BusError
-        | DescriptionError,
+        | DescriptionError
+        | RenderingUnavailable,
     ):
         return UsageError(str(exc))
     return None
@@ -121,3 +124,18 @@ def add_run_output_options(parser: argparse.ArgumentParser) -> None:
         help="also write each scenario's raw time series (states, commands, diagnostics) "
         "to <output>/<scenario>.npz",
     )
+    parser.add_argument(
+        "--video",
+        action="store_true",
+        help="also render each scenario to <output>/<scenario>.mp4 (MuJoCo offscreen, 30 "
+        "frames per simulated second; pushes, COP, CMP, support polygon and a caption drawn "
+        "in; either backend)",
+    )
+
+
+def prepare_video(args: argparse.Namespace) -> None:
+    """With ``--video``, choose headless OpenGL before anything imports MuJoCo."""
+    if getattr(args, "video", False):
+        from clients.visual.gl import choose_headless_gl
+
+        choose_headless_gl()

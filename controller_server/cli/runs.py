@@ -7,16 +7,21 @@ from pathlib import Path
 
 from controller_server.cli.common import (
     CONTROLLER_NAMES,
+    UsageError,
     add_client_key_options,
     add_run_output_options,
     check_endpoint_option,
     curve_keys,
+    prepare_video,
 )
 
 __all__ = ["add_parsers"]
 
 
 def _sim(args: argparse.Namespace) -> int:
+    if args.video and args.sweep_push:
+        raise UsageError("--video draws scenario runs; a --sweep-push writes no video")
+    prepare_video(args)
     from clients.sim.app import SWEEP_DIRECTIONS, run_scenarios, server_endpoint, sweep_controllers
     from clients.sim.scenario import PushSpec
 
@@ -45,6 +50,7 @@ def _sim(args: argparse.Namespace) -> int:
             curve=curve,
             record_dir=record_dir,
             series=args.series,
+            video=args.video,
         )
         return 1 if any(report["fell"] or not report["complete"] for report in reports) else 0
     push = PushSpec(
@@ -62,6 +68,7 @@ def _sim(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
+    prepare_video(args)
     from clients.demo import run_demo
 
     check_endpoint_option("--connect", args.connect)
@@ -73,6 +80,7 @@ def _demo(args: argparse.Namespace) -> int:
         curve=curve_keys(args),
         record_dir=Path(args.record) if args.record else None,
         series=args.series,
+        video=args.video,
     )
 
 
