@@ -10,10 +10,12 @@ prints a summary table.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from clients.client import CurveKeys
 from clients.sim.app import run_scenarios
+from clients.sim.runner import RunRecord
 
 __all__ = ["DEMO_SCENARIOS", "run_demo"]
 
@@ -30,6 +32,7 @@ def run_demo(
     record_dir: Path | None = None,
     series: bool = False,
     video: bool = False,
+    observer: Callable[[RunRecord], None] | None = None,
 ) -> int:
     """Run the push scenarios; exit code 0 if the robot stayed up in all of them, else 1."""
     if endpoint is None:
@@ -43,6 +46,7 @@ def run_demo(
         record_dir=record_dir,
         series=series,
         video=video,
+        observer=observer,
     )
     print(f"report: {output_dir / 'report.json'}; plots: {', '.join(r['plot'] for r in reports)}")
     if video:

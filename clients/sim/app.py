@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +13,7 @@ from clients.server_process import ServerProcess
 from clients.sim.metrics import compute_metrics
 from clients.sim.output import OutputDirectory
 from clients.sim.plots import plot_run, plot_walk_paths
-from clients.sim.runner import run_scenario
+from clients.sim.runner import RunRecord, run_scenario
 from clients.sim.scenario import PushSpec, Scenario, load_scenario
 from clients.sim.series import save_series
 from clients.visual.gl import choose_headless_gl
@@ -71,6 +71,7 @@ def run_scenarios(
     record_dir: Path | None = None,
     series: bool = False,
     video: bool = False,
+    observer: Callable[[RunRecord], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table.
 
@@ -81,7 +82,8 @@ def run_scenarios(
     With ``record_dir``, each scenario's conversation with the server is
     recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it); with
     ``series``, its raw time series go to ``<name>.npz`` (:mod:`clients.sim.series`);
-    with ``video``, it is rendered to ``<name>.mp4`` (:mod:`clients.visual.video`).
+    with ``video``, it is rendered to ``<name>.mp4`` (:mod:`clients.visual.video`);
+    ``observer`` sees the record after every tick (the live view, :mod:`clients.visual.live`).
 
     Raises:
         ScenarioError: A scenario cannot run (checked for all before the first runs).
@@ -102,7 +104,12 @@ def run_scenarios(
                 log_path = record_dir / f"{scenario.name}.mcap"
             with ProgressBar(scenario.name, enabled=progress) as bar:
                 record = run_scenario(
-                    scenario, address, progress=bar, curve=curve, log_path=log_path
+                    scenario,
+                    address,
+                    progress=bar,
+                    curve=curve,
+                    log_path=log_path,
+                    observer=observer,
                 )
             metrics = compute_metrics(record)
             if record.commands:

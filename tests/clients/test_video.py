@@ -110,7 +110,7 @@ def test_a_video_of_a_sweep_is_refused_in_one_line(tmp_path):
     result = poise(["sim", "stand", "--sweep-push", "--video"], tmp_path)
     assert result.returncode == 2
     assert result.stderr.splitlines() == [
-        "poise sim: --video draws scenario runs; a --sweep-push writes no video"
+        "poise sim: --video shows scenario runs; a --sweep-push has none to show"
     ]
 
 
