@@ -14,7 +14,6 @@ import select
 import shutil
 import socket
 import subprocess
-import sys
 import time
 import urllib.request
 from pathlib import Path
@@ -22,6 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
+
+from tests.helpers import POISE
 
 pytestmark = pytest.mark.e2e
 
@@ -49,9 +50,6 @@ PUSHES = "\n".join(
     for k, sign in enumerate([1, -1] * 15)
 )
 SCENARIO = f'name = "view_push"\nduration_s = 30.0\ndiagnostics_period_ticks = 10\n{PUSHES}'
-
-
-POISE = [sys.executable, "-m", "controller_server.cli"]
 
 
 def free_port() -> int:

@@ -8,7 +8,6 @@ and the push arrow's red present exactly while the push acts.
 """
 
 import subprocess
-import sys
 from pathlib import Path
 
 import av
@@ -16,6 +15,7 @@ import numpy as np
 import pytest
 
 from clients.visual.video import VIDEO_FPS
+from tests.helpers import run_poise
 
 pytestmark = pytest.mark.e2e
 
@@ -38,14 +38,7 @@ duration_s = {PUSH_DURATION_S}
 
 
 def poise(arguments: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "controller_server.cli", *arguments],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        stdin=subprocess.DEVNULL,
-    )
+    return run_poise(arguments, cwd, timeout_s=300)
 
 
 def frames(path: Path) -> list[np.ndarray]:
