@@ -19,6 +19,7 @@ import contextlib
 import io
 import logging
 import time
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -105,9 +106,9 @@ class LiveView:
         self._server.scene.set_up_direction("+z")
         self._server.scene.add_grid("/floor", width=20.0, height=20.0, cell_size=0.25)
         self._caption = self._server.gui.add_markdown("waiting for a run …")
-        self._plots: list = []
-        self._bodies: list = []
-        self._overlay_nodes: list = []
+        self._plots: list[Any] = []
+        self._bodies: list[Any] = []
+        self._overlay_nodes: list[Any] = []
         self._scene: RobotScene | None = None
         self._record: RunRecord | None = None
         self._last_show_s = self._last_plot_s = -np.inf
@@ -171,9 +172,10 @@ class LiveView:
         elif time.monotonic() - self._last_show_s >= 1.0 / VIEW_HZ:
             self.show(track_of_run(record), len(record.states) - 1)
 
-    def _add_plot(self, title: str, labels: tuple[str, ...]):  # type: ignore[no-untyped-def]
+    def _add_plot(self, title: str, labels: tuple[str, ...]) -> Any:
+        """A uPlot chart of ``labels`` over simulated time (the x axis is not a date)."""
         colours = ("#444444", "#1ec83c", "#286efa")
-        series = [{"label": "t (s)"}] + [
+        series: list[Any] = [{"label": "t (s)"}] + [
             {"label": label, "stroke": colour, "width": 2}
             for label, colour in zip(labels, colours, strict=False)
         ]

@@ -175,7 +175,7 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         "estimated), COP, CMP and support polygon on the ground, a caption; 30 frames per "
         "second of log time. Pushes are not logged, so none is drawn.",
     )
-    video.add_argument("log", metavar="LOG")
+    video.add_argument("log", metavar="LOG", help="MCAP log (`poise sim --record DIR`)")
     video.add_argument(
         "-o",
         "--output",
