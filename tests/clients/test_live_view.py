@@ -68,13 +68,22 @@ class DevTools:
     """A headless Chromium showing ``url``, driven over the DevTools protocol (CDP)."""
 
     def __init__(self, profile: Path, url: str):
-        from websockets.sync.client import connect
-
         self.process = subprocess.Popen(
             [CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", url],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )
+        try:
+            self.socket = self._connect(profile, url)
+        except BaseException:
+            self.process.terminate()  # a Chromium that did not open the page is not left running
+            self.process.wait(timeout=30)
+            raise
+        self.next_id = 0
+
+    def _connect(self, profile: Path, url: str):
+        from websockets.sync.client import connect
+
         active_port = profile / "DevToolsActivePort"
         deadline = time.monotonic() + WAIT_S
         while not (active_port.exists() and active_port.read_text().count("\n") >= 1):
@@ -88,9 +97,7 @@ class DevTools:
             with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as reply:
                 targets = json.load(reply)
             pages = [t for t in targets if t["type"] == "page" and t["url"].startswith(url)]
-        page = pages[0]
-        self.socket = connect(page["webSocketDebuggerUrl"], max_size=None)
-        self.next_id = 0
+        return connect(pages[0]["webSocketDebuggerUrl"], max_size=None)
 
     def call(self, method: str, **params):
         self.next_id += 1
