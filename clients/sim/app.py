@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -13,9 +13,12 @@ from clients.server_process import ServerProcess
 from clients.sim.metrics import compute_metrics
 from clients.sim.output import OutputDirectory
 from clients.sim.plots import plot_run, plot_walk_paths
-from clients.sim.runner import run_scenario
+from clients.sim.runner import RunRecord, run_scenario
 from clients.sim.scenario import PushSpec, Scenario, load_scenario
 from clients.sim.series import save_series
+from clients.visual.gl import choose_headless_gl
+from clients.visual.track import track_of_run
+from clients.visual.video import write_video
 
 __all__ = [
     "ABLATIONS",
@@ -67,6 +70,8 @@ def run_scenarios(
     curve: CurveKeys | None = None,
     record_dir: Path | None = None,
     series: bool = False,
+    video: bool = False,
+    observer: Callable[[RunRecord], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table.
 
@@ -76,14 +81,20 @@ def run_scenarios(
     why, then Ctrl-C or SIGTERM stops the run (``KeyboardInterrupt``).
     With ``record_dir``, each scenario's conversation with the server is
     recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it); with
-    ``series``, its raw time series go to ``<name>.npz`` (:mod:`clients.sim.series`).
+    ``series``, its raw time series go to ``<name>.npz`` (:mod:`clients.sim.series`);
+    with ``video``, it is rendered to ``<name>.mp4`` (:mod:`clients.visual.video`);
+    ``observer`` sees the record after every tick (the live view, :mod:`clients.visual.live`).
 
     Raises:
         ScenarioError: A scenario cannot run (checked for all before the first runs).
         OutputBusy: Another run writes to ``output_dir``.
+        RenderingUnavailable: ``video`` on a machine where MuJoCo cannot render
+            offscreen (checked before anything runs).
     """
     # Every scenario is checked before a server starts or a file is written.
     scenarios = [load_scenario(name, **(overrides or {})) for name in names]
+    if video:
+        choose_headless_gl()
     reports: list[dict[str, Any]] = []
     with OutputDirectory(output_dir) as output, server_endpoint(endpoint) as address:
         for scenario in scenarios:
@@ -93,7 +104,12 @@ def run_scenarios(
                 log_path = record_dir / f"{scenario.name}.mcap"
             with ProgressBar(scenario.name, enabled=progress) as bar:
                 record = run_scenario(
-                    scenario, address, progress=bar, curve=curve, log_path=log_path
+                    scenario,
+                    address,
+                    progress=bar,
+                    curve=curve,
+                    log_path=log_path,
+                    observer=observer,
                 )
             metrics = compute_metrics(record)
             if record.commands:
@@ -106,6 +122,10 @@ def run_scenarios(
                     metrics["series"] = str(
                         save_series(record, output_dir / f"{scenario.name}.npz")
                     )
+                if video:
+                    metrics["video"] = str(output_dir / f"{scenario.name}.mp4")
+                    with ProgressBar(f"{scenario.name} video", enabled=progress) as bar:
+                        write_video(track_of_run(record), metrics["video"], progress=bar)
             reports.append(metrics)
             output.write_report(reports)
             if record.stopped == "interrupted":
