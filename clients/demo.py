@@ -10,10 +10,12 @@ prints a summary table.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from clients.client import CurveKeys
 from clients.sim.app import run_scenarios
+from clients.sim.runner import RunRecord
 
 __all__ = ["DEMO_SCENARIOS", "run_demo"]
 
@@ -29,6 +31,8 @@ def run_demo(
     curve: CurveKeys | None = None,
     record_dir: Path | None = None,
     series: bool = False,
+    video: bool = False,
+    observer: Callable[[RunRecord], None] | None = None,
 ) -> int:
     """Run the push scenarios; exit code 0 if the robot stayed up in all of them, else 1."""
     if endpoint is None:
@@ -41,6 +45,10 @@ def run_demo(
         curve=curve,
         record_dir=record_dir,
         series=series,
+        video=video,
+        observer=observer,
     )
     print(f"report: {output_dir / 'report.json'}; plots: {', '.join(r['plot'] for r in reports)}")
+    if video:
+        print(f"videos: {', '.join(r['video'] for r in reports if 'video' in r)}")
     return 1 if any(r["fell"] or not r["complete"] for r in reports) else 0

@@ -1,6 +1,10 @@
-"""Helpers shared by tests: random wire states and an independent dynamics check."""
+"""Helpers shared by tests: random wire states, an independent dynamics check, the CLI."""
 
 from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -87,3 +91,21 @@ def base_tilt_deg(state) -> float:
     """Angle between a simulator state's base z axis and the world's vertical (degrees)."""
     rotation = pin.Quaternion(np.array(state.orientation_base_in_world_xyzw)).toRotationMatrix()
     return float(np.degrees(np.arccos(np.clip(rotation[2, 2], -1.0, 1.0))))
+
+
+POISE = [sys.executable, "-m", "controller_server.cli"]
+"""What the ``poise`` script runs."""
+
+
+def run_poise(
+    arguments: list[str], cwd: Path, timeout_s: float = 90.0
+) -> subprocess.CompletedProcess:
+    """``poise ARGUMENTS`` in a subprocess in ``cwd``, no stdin, bounded by ``timeout_s``."""
+    return subprocess.run(
+        [*POISE, *arguments],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        stdin=subprocess.DEVNULL,
+    )

@@ -6,10 +6,11 @@ runs) in a subprocess, in a temporary directory, bounded by a timeout.
 
 import socket
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests import helpers
 
 TIMEOUT_S = 90  # the slowest case waits out the client's 10 s hello timeout
 
@@ -141,14 +142,7 @@ MISTAKES = [
 
 
 def run_poise(arguments: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "controller_server.cli", *arguments],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=TIMEOUT_S,
-        stdin=subprocess.DEVNULL,
-    )
+    return helpers.run_poise(arguments, cwd, TIMEOUT_S)
 
 
 @pytest.mark.parametrize(

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +17,9 @@ from clients.sim.plots import plot_run, plot_walk_paths
 from clients.sim.runner import RunRecord, run_scenario
 from clients.sim.scenario import Scenario, load_scenario
 from clients.sim.series import save_series
+from clients.visual.gl import choose_headless_gl
+from clients.visual.track import track_of_run
+from clients.visual.video import write_video
 
 __all__ = ["run_scenarios", "server_endpoint"]
 
@@ -40,6 +43,8 @@ def run_scenarios(
     curve: CurveKeys | None = None,
     record_dir: Path | None = None,
     series: bool = False,
+    video: bool = False,
+    observer: Callable[[RunRecord], None] | None = None,
     workers: int = 1,
     dask: str | None = None,
 ) -> list[dict[str, Any]]:
@@ -58,15 +63,25 @@ def run_scenarios(
     With ``record_dir``, each scenario's conversation with the server is
     recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it; on
     Dask, on the worker's file system); with ``series``, its raw time series
-    go to ``<name>.npz`` (:mod:`clients.sim.series`).
+    go to ``<name>.npz`` (:mod:`clients.sim.series`); with ``video``, it is
+    rendered to ``<name>.mp4`` (:mod:`clients.visual.video`, here);
+    ``observer`` sees the record after every tick (the live view,
+    :mod:`clients.visual.live`): it needs the runs in this process (``workers=1``).
 
     Raises:
         ScenarioError: A scenario cannot run (checked for all before the first runs).
         OutputBusy: Another run writes to ``output_dir``.
         ClusterUnavailable: ``dask`` answers no scheduler.
+        RenderingUnavailable: ``video`` on a machine where MuJoCo cannot render
+            offscreen (checked before anything runs).
+        ValueError: An ``observer`` with more than one worker or with ``dask``.
     """
+    if observer is not None and (workers > 1 or dask is not None):
+        raise ValueError("an observer sees the runs of this process: workers=1, no dask")
     # Every scenario is checked before a server starts or a file is written.
     scenarios = [load_scenario(name, **(overrides or {})) for name in names]
+    if video:
+        choose_headless_gl()
     label = scenarios[0].name if len(scenarios) == 1 else "scenarios"
     tasks: _ScenarioTasks | None = None
     with OutputDirectory(output_dir) as output:
@@ -75,7 +90,8 @@ def run_scenarios(
                 RunPool(min(workers, len(scenarios)), dask, endpoint, curve) as pool,
                 ProgressBar(label, enabled=progress) as bar,
             ):
-                tasks = _ScenarioTasks(scenarios, output, pool, bar, record_dir, series)
+                tasks = _ScenarioTasks(scenarios, output, pool, bar, record_dir, series, video)
+                tasks.observer = observer
                 pool.run(tasks)
         except KeyboardInterrupt:
             if tasks is None:
@@ -99,6 +115,7 @@ class _ScenarioTasks:
         bar: ProgressBar,
         record_dir: Path | None,
         series: bool,
+        video: bool,
     ):
         self.scenarios = scenarios
         self.output = output
@@ -106,6 +123,8 @@ class _ScenarioTasks:
         self.bar = bar
         self.record_dir = record_dir
         self.series = series
+        self.video = video
+        self.observer: Callable[[RunRecord], None] | None = None
         self.started = 0
         self.done: dict[int, dict[str, Any]] = {}
         self.interrupted = False
@@ -128,6 +147,7 @@ class _ScenarioTasks:
         if self.pool.in_process:  # a bar that moves with the ticks
             detail = f"{index + 1}/{count} {scenario.name}" if count > 1 else ""
             kwargs["progress"] = lambda fraction: self.bar((index + fraction) / count, detail)
+            kwargs["observer"] = self.observer
         else:
             self.bar(len(self.done) / count, f"{len(self.done)}/{count} done")
         return Task(index, run_scenario, (scenario,), kwargs)
@@ -144,6 +164,10 @@ class _ScenarioTasks:
                 plot_walk_paths(record, Path(metrics["walking"]["plot"]))
             if self.series:
                 metrics["series"] = str(save_series(record, output_dir / f"{name}.npz"))
+            if self.video:
+                metrics["video"] = str(output_dir / f"{name}.mp4")
+                with ProgressBar(f"{name} video", enabled=self.bar.enabled) as bar:
+                    write_video(track_of_run(record), metrics["video"], progress=bar)
         self.done[task.key] = metrics
         self.output.write_report(self.reports())
         if record.stopped == "interrupted":

@@ -610,10 +610,22 @@ class MujocoBackend:
         body = self._body_id(push.body)
         data = self._data
         force_in_world = fraction * np.asarray(push.force_in_world_N, dtype=float)
-        point_in_world = data.xpos[body] + data.xmat[body].reshape(3, 3) @ push.point_in_body_m
+        point_in_world = self.body_point_in_world(push.body, push.point_in_body_m)
         data.xfrc_applied[body, :3] += force_in_world
         data.xfrc_applied[body, 3:] += np.cross(point_in_world - data.xipos[body], force_in_world)
         self._pushed_bodies.append(body)
+
+    def body_point_in_world(
+        self, body: str, point_in_body_m: Sequence[float] | np.ndarray
+    ) -> np.ndarray:
+        """Where a point fixed in ``body`` (its frame, m) is in the world, at the current state.
+
+        Raises:
+            KeyError: The model has no such body (the message lists them).
+        """
+        index = self._body_id(body)
+        rotation = self._data.xmat[index].reshape(3, 3)
+        return self._data.xpos[index] + rotation @ np.asarray(point_in_body_m, dtype=float)
 
     def _body_id(self, name: str) -> int:
         body = self._body_ids.get(name)

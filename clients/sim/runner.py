@@ -23,6 +23,7 @@ from __future__ import annotations
 import difflib
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -250,6 +251,7 @@ def run_scenario(
     timeout_s: float = 10.0,
     curve: CurveKeys | None = None,
     log_path: str | os.PathLike[str] | None = None,
+    observer: Callable[[RunRecord], None] | None = None,
 ) -> RunRecord:
     """Simulate ``scenario`` against the server at ``endpoint``.
 
@@ -260,6 +262,7 @@ def run_scenario(
         timeout_s: Per-request timeout.
         curve: CURVE keys for a server that requires them.
         log_path: MCAP file to record the conversation with the server to.
+        observer: Called with the record after every tick is added to it (a live view).
     """
     backend = make_backend(scenario)
     pushes = [push.to_push() for push in scenario.pushes]
@@ -351,6 +354,8 @@ def run_scenario(
                 record.states.append(state)
                 record.commands.append(command)
                 record.contact_flags.append(flags)
+                if observer is not None:
+                    observer(record)
                 state = backend.state()  # after the step: checked now, sent next tick
                 reason = fall_reason(state, standing_height_m, non_foot_contact)
                 if reason:

@@ -286,8 +286,8 @@ class _SweepTasks:
         label, name = task.key
         bisection = self.sweep.bisections[label][name]
         bisection.trials.append((bisection.next_force_N(), bool(result)))  # type: ignore[arg-type]
-        if not bisection.done:
-            self.waiting.append(task.key)
+        if not bisection.done:  # first in line: a worker sees its pair through, rows end in order
+            self.waiting.insert(0, task.key)
         for line in self.sweep.table()[self.printed :]:
             self.bar.print(line)
             self.printed += 1

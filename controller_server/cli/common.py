@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
+import contextlib
+from collections.abc import Callable, Iterator, Sequence
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from clients.client import CurveKeys
@@ -16,9 +17,12 @@ __all__ = [
     "UsageError",
     "add_client_key_options",
     "add_run_output_options",
+    "add_view_options",
     "as_usage_error",
     "check_endpoint_option",
     "curve_keys",
+    "live_view",
+    "prepare_video",
 ]
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
@@ -48,6 +52,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     from clients.pool import ClusterUnavailable
     from clients.sim.errors import ScenarioError, UnsupportedModel
     from clients.sim.output import OutputBusy
+    from clients.visual.gl import RenderingUnavailable
     from controller_server.models.description import DescriptionError
     from protocol.endpoints import InvalidEndpoint
     from protocol.errors import ErrorCode
@@ -65,7 +70,8 @@ def as_usage_error(exc: Exception) -> UsageError | None:
         | BridgeConfigError
         | BridgeStartError
         | BusError
-        | DescriptionError,
+        | DescriptionError
+        | RenderingUnavailable,
     ):
         return UsageError(str(exc))
     return None
@@ -123,3 +129,54 @@ def add_run_output_options(parser: argparse.ArgumentParser) -> None:
         help="also write each scenario's raw time series (states, commands, diagnostics) "
         "to <output>/<scenario>.npz",
     )
+    parser.add_argument(
+        "--video",
+        action="store_true",
+        help="also render each scenario to <output>/<scenario>.mp4 (MuJoCo offscreen, 30 "
+        "frames per simulated second; pushes, COP, CMP, support polygon and a caption drawn "
+        "in; either backend)",
+    )
+
+
+def add_view_options(parser: argparse.ArgumentParser) -> None:
+    """``--view`` and ``--view-port``: the live 3-D view in a browser."""
+    parser.add_argument(
+        "--view",
+        action="store_true",
+        help="serve a live 3-D view of each scenario as it runs at http://127.0.0.1:PORT "
+        "(robot, pushes, COP, CMP, support polygon, live plots; open it in a browser); it "
+        "stops when the command ends",
+    )
+    parser.add_argument(
+        "--view-port",
+        type=int,
+        default=8080,
+        metavar="PORT",
+        help="port of the live view (default: 8080; the next free one if taken)",
+    )
+
+
+@contextlib.contextmanager
+def live_view(args: argparse.Namespace) -> Iterator[Callable[[Any], None] | None]:
+    """With ``--view``: serve the live view and yield its run observer; else yield ``None``."""
+    if not args.view:
+        yield None
+        return
+    if not 1 <= args.view_port <= 65535:
+        raise UsageError(f"--view-port {args.view_port}: write a TCP port, 1 to 65535")
+    from clients.visual.live import LiveView
+
+    view = LiveView(port=args.view_port)
+    print(f"live view: {view.url}", flush=True)
+    try:
+        yield view.observe
+    finally:
+        view.close()
+
+
+def prepare_video(args: argparse.Namespace) -> None:
+    """With ``--video``, choose headless OpenGL before anything imports MuJoCo."""
+    if getattr(args, "video", False):
+        from clients.visual.gl import choose_headless_gl
+
+        choose_headless_gl()

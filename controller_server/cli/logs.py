@@ -1,4 +1,4 @@
-"""``poise replay`` and ``poise log info|plot``: recorded conversations."""
+"""``poise replay`` and ``poise log info|plot|video``: recorded conversations."""
 
 from __future__ import annotations
 
@@ -93,6 +93,29 @@ def _log_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _log_video(args: argparse.Namespace) -> int:
+    from clients.visual.gl import choose_headless_gl
+
+    choose_headless_gl()  # before MuJoCo is imported
+    from clients.progress import ProgressBar
+    from clients.replay import ReplayError
+    from clients.visual.track import track_of_log
+    from clients.visual.video import write_video
+    from protocol.recording import BadLog
+
+    log = Path(args.log)
+    output = Path(args.output) if args.output else Path("out/logs") / f"{log.stem}.mp4"
+    try:
+        track = track_of_log(log)
+    except (BadLog, ReplayError) as exc:
+        raise UsageError(str(exc)) from None
+    output.parent.mkdir(parents=True, exist_ok=True)
+    with ProgressBar(f"{log.name} video") as bar:
+        write_video(track, output, progress=bar)
+    print(f"{log}: {output}")
+    return 0
+
+
 def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``replay`` and ``log``."""
     replay = commands.add_parser(
@@ -150,3 +173,19 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="directory for the plots (default: out/logs)",
     )
     plot.set_defaults(handler=_log_plot)
+    video = log_commands.add_parser(
+        "video",
+        help="an MP4 of a log's first session, rendered by MuJoCo offscreen",
+        description="Render the first session of a log as `poise sim --video` renders a run: "
+        "the robot in MuJoCo (the states the client sent; for IMU states, the base the server "
+        "estimated), COP, CMP and support polygon on the ground, a caption; 30 frames per "
+        "second of log time. Pushes are not logged, so none is drawn.",
+    )
+    video.add_argument("log", metavar="LOG", help="MCAP log (`poise sim --record DIR`)")
+    video.add_argument(
+        "-o",
+        "--output",
+        metavar="FILE",
+        help="the MP4 to write (default: out/logs/<log name>.mp4)",
+    )
+    video.set_defaults(handler=_log_video)

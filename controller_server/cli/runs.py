@@ -7,16 +7,27 @@ from pathlib import Path
 
 from controller_server.cli.common import (
     CONTROLLER_NAMES,
+    UsageError,
     add_client_key_options,
     add_run_output_options,
+    add_view_options,
     check_endpoint_option,
     curve_keys,
+    live_view,
+    prepare_video,
 )
 
 __all__ = ["add_parsers"]
 
 
 def _sim(args: argparse.Namespace) -> int:
+    if (args.video or args.view) and args.sweep_push:
+        option = "--video" if args.video else "--view"
+        raise UsageError(f"{option} shows scenario runs; a --sweep-push has none to show")
+    if args.view and (args.dask or (args.workers or 1) > 1):
+        option = "--dask" if args.dask else f"--workers {args.workers}"
+        raise UsageError(f"--view shows the runs of this process, one at a time: drop {option}")
+    prepare_video(args)
     from clients.pool import RunPool, default_workers
     from clients.sim.app import run_scenarios
     from clients.sim.output import OutputDirectory
@@ -41,17 +52,20 @@ def _sim(args: argparse.Namespace) -> int:
     workers = default_workers() if args.workers is None else args.workers
     if not args.sweep_push:
         record_dir = Path(args.record) if args.record else None
-        reports = run_scenarios(
-            args.scenarios,
-            Path(args.output),
-            args.connect,
-            overrides,
-            curve=curve,
-            record_dir=record_dir,
-            series=args.series,
-            workers=workers,
-            dask=args.dask,
-        )
+        with live_view(args) as observer:
+            reports = run_scenarios(
+                args.scenarios,
+                Path(args.output),
+                args.connect,
+                overrides,
+                curve=curve,
+                record_dir=record_dir,
+                series=args.series,
+                video=args.video,
+                observer=observer,
+                workers=1 if args.view else workers,
+                dask=args.dask,
+            )
         return 1 if any(report["fell"] or not report["complete"] for report in reports) else 0
     push = PushSpec(
         body=args.push_body,
@@ -82,18 +96,22 @@ def _positive_int(text: str) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
+    prepare_video(args)
     from clients.demo import run_demo
 
     check_endpoint_option("--connect", args.connect)
-    return run_demo(
-        Path(args.output),
-        args.connect,
-        args.backend,
-        args.controller,
-        curve=curve_keys(args),
-        record_dir=Path(args.record) if args.record else None,
-        series=args.series,
-    )
+    with live_view(args) as observer:
+        return run_demo(
+            Path(args.output),
+            args.connect,
+            args.backend,
+            args.controller,
+            curve=curve_keys(args),
+            record_dir=Path(args.record) if args.record else None,
+            series=args.series,
+            video=args.video,
+            observer=observer,
+        )
 
 
 def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -216,6 +234,7 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
     )
     add_client_key_options(sim)
     add_run_output_options(sim)
+    add_view_options(sim)
     sim.set_defaults(handler=_sim)
 
     demo = commands.add_parser(
@@ -252,4 +271,5 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
     )
     add_client_key_options(demo)
     add_run_output_options(demo)
+    add_view_options(demo)
     demo.set_defaults(handler=_demo)

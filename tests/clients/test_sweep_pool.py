@@ -231,3 +231,14 @@ def alive(pid):
         return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"
     except (FileNotFoundError, IndexError):
         return False
+
+
+@pytest.mark.parametrize("option", [["--workers", "2"], ["--dask", "tcp://127.0.0.1:9"]])
+def test_the_live_view_needs_the_runs_in_this_process(option, capsys, tmp_path):
+    assert main(["sim", "stand", "--view", *option, "--output", str(tmp_path)]) == 2
+    error = capsys.readouterr().err
+    assert (
+        error
+        == f"poise sim: --view shows the runs of this process, one at a time: drop {option[0]}"
+        + (f" {option[1]}\n" if option[0] == "--workers" else "\n")
+    )

@@ -1,0 +1,3 @@
+"""Seeing a run: the robot posed in MuJoCo, its overlays, video files and the live view."""
+
+__all__: list[str] = []
