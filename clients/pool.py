@@ -39,7 +39,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from clients.client import CurveKeys
 from clients.server_process import ServerProcess
@@ -280,7 +280,8 @@ def _on_dask_worker(fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[
         from distributed import get_worker
 
         worker = get_worker()
-        kwargs = {**kwargs, "endpoint": worker.plugins[WORKER_SERVER_PLUGIN].endpoint(worker)}
+        plugin = cast(WorkerServer, worker.plugins[WORKER_SERVER_PLUGIN])
+        kwargs = {**kwargs, "endpoint": plugin.endpoint(worker)}
     return fn(*args, **kwargs)
 
 

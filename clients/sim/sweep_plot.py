@@ -62,7 +62,8 @@ def plot_sweep(sweep: Sweep, path: Path) -> None:
         ax.set_rlabel_position(-67.5)  # the force scale between the swept directions
         ax.tick_params(axis="y", labelsize=7)
         for survived, style in ((True, {"marker": "o", "color": "tab:green"}), (False, {})):
-            inside, beyond = [], []
+            inside: list[tuple[float, float]] = []  # (azimuth rad, force N)
+            beyond: list[tuple[float, float]] = []
             for name, bisection in row.items():
                 for force_N, ok in bisection.trials:
                     if ok == survived:
