@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from collections import Counter
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from clients.replay import recorded_session
 from protocol.messages import Command, Hello, State, Welcome
-from protocol.recording import BadLog, read_log
+from protocol.recording import BadLog, LoggedMessage, LogReader, read_log
 
 __all__ = ["LogSummary", "SessionSummary", "format_summary", "plot_log", "summarize_log"]
 
@@ -50,8 +51,28 @@ class LogSummary:
         return states / self.duration_s if self.duration_s > 0 else 0.0
 
 
-def summarize_log(path: str | os.PathLike[str]) -> LogSummary:
+PROGRESS_EVERY = 1000
+"""Messages read between two calls of a progress callback."""
+
+
+def _reporting(
+    reader: LogReader, progress: Callable[[float], None] | None
+) -> Iterator[LoggedMessage]:
+    """``reader``'s messages, telling ``progress`` the fraction of the file read now and then."""
+    for index, logged in enumerate(reader):
+        if progress is not None and index % PROGRESS_EVERY == 0:
+            progress(reader.fraction_read)
+        yield logged
+
+
+def summarize_log(
+    path: str | os.PathLike[str], progress: Callable[[float], None] | None = None
+) -> LogSummary:
     """Read a log once and summarize it.
+
+    Args:
+        path: The MCAP log.
+        progress: Optional callable told the fraction of the file read (0 to 1).
 
     Raises:
         BadLog: The file is not a readable Poise log.
@@ -59,7 +80,7 @@ def summarize_log(path: str | os.PathLike[str]) -> LogSummary:
     summary = LogSummary()
     first_ns = last_ns = None
     awaiting_welcome = False
-    for logged in read_log(path):
+    for logged in _reporting(read_log(path), progress):
         summary.messages += 1
         summary.counts[f"{logged.message.type} {logged.direction}"] += 1
         first_ns = logged.time_ns if first_ns is None else first_ns
@@ -97,10 +118,15 @@ def format_summary(path: str | os.PathLike[str], summary: LogSummary) -> str:
     return "\n".join(lines)
 
 
-def plot_log(path: str | os.PathLike[str], output_dir: str | os.PathLike[str]) -> Path:
+def plot_log(
+    path: str | os.PathLike[str],
+    output_dir: str | os.PathLike[str],
+    progress: Callable[[float], None] | None = None,
+) -> Path:
     """Plot the first session of a log to ``output_dir/<log name>.png``; return the file.
 
     Time is each state's ``time_s``; pushes are not in a log, so none is shaded.
+    ``progress`` is told the fraction of the file read (0 to 1), as it is read.
 
     Raises:
         BadLog: Not a log, or no state in it was answered by a command.
@@ -108,7 +134,7 @@ def plot_log(path: str | os.PathLike[str], output_dir: str | os.PathLike[str]) -
     """
     from clients.sim.plots import PlotSeries, dof_names, plot_series
 
-    session = recorded_session(path, read_log(path))
+    session = recorded_session(path, _reporting(read_log(path), progress))
     time_s, commands = [], []
     for _, request in session.requests:
         reply = session.replies.get(request.seq)

@@ -8,6 +8,7 @@ says what to fix. The same codes raise as :class:`ProtocolError` in Python.
 from __future__ import annotations
 
 from enum import IntEnum
+from typing import Any
 
 __all__ = ["ErrorCode", "PoiseError", "ProtocolError"]
 
@@ -57,7 +58,22 @@ class ErrorCode(IntEnum):
 
 
 class PoiseError(Exception):
-    """Base class of every error Poise raises on purpose."""
+    """Base class of every error Poise raises on purpose.
+
+    It survives pickling whatever its subclass's ``__init__`` takes (a run on
+    a worker process or a Dask worker raises it in the caller as it was).
+    """
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return _rebuild_error, (type(self), self.args, self.__dict__)
+
+
+def _rebuild_error(cls: type[PoiseError], args: tuple[Any, ...], state: dict[str, Any]) -> Any:
+    """An unpickled :class:`PoiseError`: its arguments and attributes, without ``__init__``."""
+    error = cls.__new__(cls, *args)
+    error.args = args
+    error.__dict__.update(state)
+    return error
 
 
 class ProtocolError(PoiseError):

@@ -419,10 +419,23 @@ class LogReader:
         self.truncated = False
         self.stopped_at_byte: int | None = None
         """Where reading stopped in a truncated log."""
+        self._file: BinaryIO | None = None
+        self._size_bytes = 0
+        self._finished = False
+
+    @property
+    def fraction_read(self) -> float:
+        """How much of the file has been read (0 to 1, by bytes): for a progress bar."""
+        if self._finished:
+            return 1.0
+        if self._file is None or self._size_bytes == 0:
+            return 0.0
+        return min(1.0, self._file.tell() / self._size_bytes)
 
     def __iter__(self) -> Iterator[LoggedMessage]:
         channels: dict[int, Channel] = {}
         with open(self.path, "rb") as file:
+            self._file, self._size_bytes = file, os.fstat(file.fileno()).st_size
             records = StreamReader(file, validate_crcs=True).records
             while True:
                 try:
@@ -441,6 +454,7 @@ class LogReader:
                 elif isinstance(record, McapMessage):
                     self.messages_read += 1
                     yield _logged(self.path, channels, record)
+        self._file, self._finished = None, True
 
     def _cut_short(self, exc: BaseException, offset: int) -> None:
         self.truncated = True

@@ -1,4 +1,4 @@
-"""``poise sim``: run scenarios or a push sweep against a server, write reports and plots."""
+"""``poise sim``: run scenarios against a server, write reports and plots (sweeps: .sweep)."""
 
 from __future__ import annotations
 
@@ -8,47 +8,20 @@ from pathlib import Path
 from typing import Any
 
 from clients.client import CurveKeys
+from clients.pool import RunPool, Task
 from clients.progress import ProgressBar
 from clients.server_process import ServerProcess
 from clients.sim.metrics import compute_metrics
 from clients.sim.output import OutputDirectory
 from clients.sim.plots import plot_run, plot_walk_paths
 from clients.sim.runner import RunRecord, run_scenario
-from clients.sim.scenario import PushSpec, Scenario, load_scenario
+from clients.sim.scenario import Scenario, load_scenario
 from clients.sim.series import save_series
 from clients.visual.gl import choose_headless_gl
 from clients.visual.track import track_of_run
 from clients.visual.video import write_video
 
-__all__ = [
-    "ABLATIONS",
-    "SWEEP_CONTROLLERS",
-    "SWEEP_DIRECTIONS",
-    "run_scenarios",
-    "server_endpoint",
-    "sweep_controllers",
-    "sweep_push",
-]
-
-ANGULAR_OFF: dict[str, Any] = {"angular_momentum_gain": 0.0, "weight_angular_momentum": 0.0}
-ABLATIONS: dict[str, dict[str, Any]] = {
-    "tracking only": {"weight_linear_momentum": 0.0, **ANGULAR_OFF},
-    "+ linear momentum": ANGULAR_OFF,
-    "+ linear and angular momentum": {},
-}
-"""Thesis ch. 7.1 ablations of the momentum controller, as parameter overrides."""
-SWEEP_CONTROLLERS: dict[str, tuple[str, dict[str, Any]]] = {
-    **{label: ("momentum", params) for label, params in ABLATIONS.items()},
-    "prioritized (de Lasa 2010)": ("prioritized", {}),
-}
-"""What ``poise sim --sweep-push`` compares: label → (controller, parameter overrides)."""
-SWEEP_DIRECTIONS: dict[str, tuple[float, float, float]] = {
-    "from behind": (1.0, 0.0, 0.0),
-    "from the front": (-1.0, 0.0, 0.0),
-    "from the side": (0.0, 1.0, 0.0),
-}
-"""Default push directions of the sweep (world axes, x forward, y left): a robot
-survives a push of a given size only if it survives it from its weakest side."""
+__all__ = ["run_scenarios", "server_endpoint"]
 
 
 @contextlib.contextmanager
@@ -72,67 +45,136 @@ def run_scenarios(
     series: bool = False,
     video: bool = False,
     observer: Callable[[RunRecord], None] | None = None,
+    workers: int = 1,
+    dask: str | None = None,
 ) -> list[dict[str, Any]]:
     """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table.
 
-    ``report.json`` is rewritten after every scenario, so a run killed half-way
-    leaves the report of what ran; a scenario stopped early (Ctrl-C, SIGTERM, a
-    server that stopped answering) is reported with ``complete: false`` and
-    why, then Ctrl-C or SIGTERM stops the run (``KeyboardInterrupt``).
+    The scenarios run on a :class:`~clients.pool.RunPool` of ``workers``
+    local processes (no more than there are scenarios), or on the Dask
+    cluster at ``dask``; the report, plots
+    and table are made here, in the order of ``names`` whatever the order the
+    runs finish in. ``report.json`` is rewritten after every scenario, so a run
+    killed half-way leaves the report of what ran; in this process
+    (``workers=1``) a scenario stopped early (Ctrl-C, SIGTERM, a server that
+    stopped answering) is reported with ``complete: false`` and why, then
+    Ctrl-C or SIGTERM stops the run (``KeyboardInterrupt``); with workers, the
+    scenarios still running are abandoned.
     With ``record_dir``, each scenario's conversation with the server is
-    recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it); with
-    ``series``, its raw time series go to ``<name>.npz`` (:mod:`clients.sim.series`);
-    with ``video``, it is rendered to ``<name>.mp4`` (:mod:`clients.visual.video`);
-    ``observer`` sees the record after every tick (the live view, :mod:`clients.visual.live`).
+    recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it; on
+    Dask, on the worker's file system); with ``series``, its raw time series
+    go to ``<name>.npz`` (:mod:`clients.sim.series`); with ``video``, it is
+    rendered to ``<name>.mp4`` (:mod:`clients.visual.video`, here);
+    ``observer`` sees the record after every tick (the live view,
+    :mod:`clients.visual.live`): it needs the runs in this process (``workers=1``).
 
     Raises:
         ScenarioError: A scenario cannot run (checked for all before the first runs).
         OutputBusy: Another run writes to ``output_dir``.
+        ClusterUnavailable: ``dask`` answers no scheduler.
         RenderingUnavailable: ``video`` on a machine where MuJoCo cannot render
             offscreen (checked before anything runs).
+        ValueError: An ``observer`` with more than one worker or with ``dask``.
     """
+    if observer is not None and (workers > 1 or dask is not None):
+        raise ValueError("an observer sees the runs of this process: workers=1, no dask")
     # Every scenario is checked before a server starts or a file is written.
     scenarios = [load_scenario(name, **(overrides or {})) for name in names]
     if video:
         choose_headless_gl()
-    reports: list[dict[str, Any]] = []
-    with OutputDirectory(output_dir) as output, server_endpoint(endpoint) as address:
-        for scenario in scenarios:
-            log_path = None
-            if record_dir is not None:
-                record_dir.mkdir(parents=True, exist_ok=True)
-                log_path = record_dir / f"{scenario.name}.mcap"
-            with ProgressBar(scenario.name, enabled=progress) as bar:
-                record = run_scenario(
-                    scenario,
-                    address,
-                    progress=bar,
-                    curve=curve,
-                    log_path=log_path,
-                    observer=observer,
-                )
-            metrics = compute_metrics(record)
-            if record.commands:
-                metrics["plot"] = str(output_dir / f"{scenario.name}.png")
-                plot_run(record, Path(metrics["plot"]))
-                if "walking" in metrics:
-                    metrics["walking"]["plot"] = str(output_dir / f"{scenario.name}_paths.png")
-                    plot_walk_paths(record, Path(metrics["walking"]["plot"]))
-                if series:
-                    metrics["series"] = str(
-                        save_series(record, output_dir / f"{scenario.name}.npz")
-                    )
-                if video:
-                    metrics["video"] = str(output_dir / f"{scenario.name}.mp4")
-                    with ProgressBar(f"{scenario.name} video", enabled=progress) as bar:
-                        write_video(track_of_run(record), metrics["video"], progress=bar)
-            reports.append(metrics)
-            output.write_report(reports)
-            if record.stopped == "interrupted":
-                _print_table(reports)
-                raise KeyboardInterrupt
+    label = scenarios[0].name if len(scenarios) == 1 else "scenarios"
+    tasks: _ScenarioTasks | None = None
+    with OutputDirectory(output_dir) as output:
+        try:  # the pool sees the interrupt: it abandons what still runs
+            with (
+                RunPool(min(workers, len(scenarios)), dask, endpoint, curve) as pool,
+                ProgressBar(label, enabled=progress) as bar,
+            ):
+                tasks = _ScenarioTasks(scenarios, output, pool, bar, record_dir, series, video)
+                tasks.observer = observer
+                pool.run(tasks)
+        except KeyboardInterrupt:
+            if tasks is None:
+                raise
+            tasks.interrupted = True
+    reports = tasks.reports()
     _print_table(reports)
+    if tasks.interrupted:
+        raise KeyboardInterrupt
     return reports
+
+
+class _ScenarioTasks:
+    """The pool's task source of :func:`run_scenarios`: each scenario once, in order."""
+
+    def __init__(
+        self,
+        scenarios: list[Scenario],
+        output: OutputDirectory,
+        pool: RunPool,
+        bar: ProgressBar,
+        record_dir: Path | None,
+        series: bool,
+        video: bool,
+    ):
+        self.scenarios = scenarios
+        self.output = output
+        self.pool = pool
+        self.bar = bar
+        self.record_dir = record_dir
+        self.series = series
+        self.video = video
+        self.observer: Callable[[RunRecord], None] | None = None
+        self.started = 0
+        self.done: dict[int, dict[str, Any]] = {}
+        self.interrupted = False
+
+    def reports(self) -> list[dict[str, Any]]:
+        """The reports of the scenarios done, in the order given."""
+        return [self.done[index] for index in sorted(self.done)]
+
+    def next_task(self) -> Task | None:
+        if self.started == len(self.scenarios) or self.interrupted:
+            return None
+        index = self.started
+        scenario = self.scenarios[index]
+        self.started += 1
+        kwargs: dict[str, Any] = {}
+        if self.record_dir is not None:
+            self.record_dir.mkdir(parents=True, exist_ok=True)
+            kwargs["log_path"] = self.record_dir / f"{scenario.name}.mcap"
+        count = len(self.scenarios)
+        if self.pool.in_process:  # a bar that moves with the ticks
+            detail = f"{index + 1}/{count} {scenario.name}" if count > 1 else ""
+            kwargs["progress"] = lambda fraction: self.bar((index + fraction) / count, detail)
+            kwargs["observer"] = self.observer
+        else:
+            self.bar(len(self.done) / count, f"{len(self.done)}/{count} done")
+        return Task(index, run_scenario, (scenario,), kwargs)
+
+    def finished(self, task: Task, record: RunRecord) -> None:
+        name = record.scenario.name
+        output_dir = self.output.path
+        metrics = compute_metrics(record)
+        if record.commands:
+            metrics["plot"] = str(output_dir / f"{name}.png")
+            plot_run(record, Path(metrics["plot"]))
+            if "walking" in metrics:
+                metrics["walking"]["plot"] = str(output_dir / f"{name}_paths.png")
+                plot_walk_paths(record, Path(metrics["walking"]["plot"]))
+            if self.series:
+                metrics["series"] = str(save_series(record, output_dir / f"{name}.npz"))
+            if self.video:
+                metrics["video"] = str(output_dir / f"{name}.mp4")
+                with ProgressBar(f"{name} video", enabled=self.bar.enabled) as bar:
+                    write_video(track_of_run(record), metrics["video"], progress=bar)
+        self.done[task.key] = metrics
+        self.output.write_report(self.reports())
+        if record.stopped == "interrupted":
+            self.interrupted = True
+        if not self.pool.in_process:
+            count = len(self.scenarios)
+            self.bar(len(self.done) / count, f"{len(self.done)}/{count} done")
 
 
 def _print_table(reports: list[dict[str, Any]]) -> None:
@@ -159,81 +201,3 @@ def _print_table(reports: list[dict[str, Any]]) -> None:
             f"{r['cop_strictly_inside_fraction']:>8.0%}{r['foot_slip_m'] * 1e3:>9.1f}"
             f"{r['real_time_factor']:>7.2f}"
         )
-
-
-def sweep_push(
-    base: Scenario,
-    push: PushSpec,
-    endpoint: str,
-    max_force_N: float = 2000.0,
-    tolerance_N: float = 5.0,
-    settle_s: float = 3.0,
-    curve: CurveKeys | None = None,
-) -> float:
-    """Largest push force (N) the scenario survives, by bisection (thesis ch. 7.1).
-
-    The push's direction is ``push.force_in_world_N`` normalised; its body,
-    point, start and duration are kept. Each trial runs at least ``settle_s``
-    past the end of the push: a robot still toppling when the scenario's own
-    duration ends has not survived. Returns 0 if even the smallest push fells it.
-    """
-    duration_s = max(base.duration_s, push.start_s + push.duration_s + settle_s)
-    direction = [
-        c / max(1e-12, sum(x * x for x in push.force_in_world_N) ** 0.5)
-        for c in push.force_in_world_N
-    ]
-
-    def survives(force_N: float) -> bool:
-        spec = push.model_copy(update={"force_in_world_N": tuple(force_N * d for d in direction)})
-        scenario = base.model_copy(update={"pushes": [spec], "duration_s": duration_s})
-        return not run_scenario(scenario, endpoint, curve=curve).fell
-
-    low, high = 0.0, max_force_N
-    if survives(high):
-        return high
-    while high - low > tolerance_N:
-        middle = 0.5 * (low + high)
-        low, high = (middle, high) if survives(middle) else (low, middle)
-    return low
-
-
-def sweep_controllers(
-    scenario_name: str,
-    push: PushSpec,
-    directions: dict[str, tuple[float, float, float]],
-    endpoint: str,
-    overrides: dict[str, Any] | None = None,
-    curve: CurveKeys | None = None,
-) -> dict[str, dict[str, float]]:
-    """:func:`sweep_push` for each of ``SWEEP_CONTROLLERS`` and each direction; prints a table.
-
-    The scenario's own pushes are removed; its parameters and parameter
-    changes are kept only for its own controller (they are written for it).
-    Returns label → direction → largest force survived (N).
-    """
-    own_controller = load_scenario(scenario_name).controller
-    header = "".join(f"{name:>16}" for name in directions)
-    print(f"{'largest push survived (N)':<32}{header}{'weakest':>10}{'× tracking':>12}")
-    results: dict[str, dict[str, float]] = {}
-    for label, (controller, params) in SWEEP_CONTROLLERS.items():
-        base = load_scenario(scenario_name, **{**(overrides or {}), "controller": controller})
-        own = controller == own_controller
-        base = base.model_copy(
-            update={
-                "params": {**(base.params if own else {}), **params},
-                "param_changes": base.param_changes if own else [],
-                "pushes": [],
-            }
-        )
-        results[label] = {
-            name: sweep_push(
-                base, push.model_copy(update={"force_in_world_N": xyz}), endpoint, curve=curve
-            )
-            for name, xyz in directions.items()
-        }
-        weakest = min(results[label].values())
-        baseline = min(next(iter(results.values())).values())
-        ratio = f"{weakest / baseline:.2f}×" if baseline > 0 else "-"
-        cells = "".join(f"{force:>16.1f}" for force in results[label].values())
-        print(f"{label:<32}{cells}{weakest:>10.1f}{ratio:>12}", flush=True)
-    return results

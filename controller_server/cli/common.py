@@ -49,6 +49,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     from clients.bridge.config import BridgeConfigError
     from clients.bridge.loop import BridgeStartError
     from clients.client import ServerError, ServerTimeout
+    from clients.pool import ClusterUnavailable
     from clients.sim.errors import ScenarioError, UnsupportedModel
     from clients.sim.output import OutputBusy
     from clients.visual.gl import RenderingUnavailable
@@ -64,6 +65,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
         | UnsupportedModel
         | InvalidEndpoint
         | ServerTimeout
+        | ClusterUnavailable
         | OutputBusy
         | BridgeConfigError
         | BridgeStartError

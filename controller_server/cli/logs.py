@@ -65,10 +65,13 @@ def _replay(args: argparse.Namespace) -> int:
 
 def _log_info(args: argparse.Namespace) -> int:
     from clients.log_info import format_summary, summarize_log
+    from clients.progress import ProgressBar
     from protocol.recording import BadLog
 
     try:
-        print(format_summary(args.log, summarize_log(args.log)))
+        with ProgressBar(Path(args.log).name) as bar:
+            summary = summarize_log(args.log, progress=bar)
+        print(format_summary(args.log, summary))
     except BadLog as exc:
         raise UsageError(str(exc)) from None
     return 0
@@ -76,12 +79,15 @@ def _log_info(args: argparse.Namespace) -> int:
 
 def _log_plot(args: argparse.Namespace) -> int:
     from clients.log_info import plot_log
+    from clients.progress import ProgressBar
     from clients.replay import ReplayError
     from protocol.recording import BadLog
 
     for log_path in args.log:
         try:
-            print(f"{log_path}: {plot_log(log_path, args.output)}")
+            with ProgressBar(Path(log_path).name) as bar:
+                plot_path = plot_log(log_path, args.output, progress=bar)
+            print(f"{log_path}: {plot_path}")
         except (BadLog, ReplayError) as exc:
             raise UsageError(str(exc)) from None
     return 0

@@ -24,9 +24,15 @@ def _sim(args: argparse.Namespace) -> int:
     if (args.video or args.view) and args.sweep_push:
         option = "--video" if args.video else "--view"
         raise UsageError(f"{option} shows scenario runs; a --sweep-push has none to show")
+    if args.view and (args.dask or (args.workers or 1) > 1):
+        option = "--dask" if args.dask else f"--workers {args.workers}"
+        raise UsageError(f"--view shows the runs of this process, one at a time: drop {option}")
     prepare_video(args)
-    from clients.sim.app import SWEEP_DIRECTIONS, run_scenarios, server_endpoint, sweep_controllers
+    from clients.pool import RunPool, default_workers
+    from clients.sim.app import run_scenarios
+    from clients.sim.output import OutputDirectory
     from clients.sim.scenario import PushSpec
+    from clients.sim.sweep import SWEEP_CONTROLLERS, SWEEP_DIRECTIONS, sweep_controllers
 
     overrides = {}
     if args.backend:
@@ -43,6 +49,7 @@ def _sim(args: argparse.Namespace) -> int:
         overrides["contacts"] = [{"name": frame, "frame": frame} for frame in args.contacts]
     check_endpoint_option("--connect", args.connect)
     curve = curve_keys(args)
+    workers = default_workers() if args.workers is None else args.workers
     if not args.sweep_push:
         record_dir = Path(args.record) if args.record else None
         with live_view(args) as observer:
@@ -56,6 +63,8 @@ def _sim(args: argparse.Namespace) -> int:
                 series=args.series,
                 video=args.video,
                 observer=observer,
+                workers=1 if args.view else workers,
+                dask=args.dask,
             )
         return 1 if any(report["fell"] or not report["complete"] for report in reports) else 0
     push = PushSpec(
@@ -67,9 +76,23 @@ def _sim(args: argparse.Namespace) -> int:
     directions = SWEEP_DIRECTIONS
     if args.push_direction:
         directions = {f"({x:g}, {y:g}, {z:g})": (x, y, z) for x, y, z in args.push_direction}
-    with server_endpoint(args.connect) as endpoint:
-        sweep_controllers(args.scenarios[0], push, directions, endpoint, overrides, curve=curve)
+    output_dir = Path(args.output)
+    pairs = len(SWEEP_CONTROLLERS) * len(directions)  # no more workers than bisections
+    with (
+        OutputDirectory(output_dir),
+        RunPool(min(workers, pairs), args.dask, args.connect, curve) as pool,
+    ):
+        sweep_controllers(
+            args.scenarios[0], push, directions, pool, overrides, output_dir=output_dir
+        )
     return 0
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not a positive number of workers")
+    return value
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -156,10 +179,29 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="use a running server at ENDPOINT (tcp://HOST:PORT) instead of starting one",
     )
     sim.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="run the sweep's bisections, or the scenarios, on N local worker processes "
+        "sharing one server (default: one per core, no more than there are bisections or "
+        "scenarios; 1: one by one in this process, a scenario's progress bar moving with its "
+        "ticks); the same results for any N",
+    )
+    sim.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="run them on the Dask cluster whose scheduler is at ADDRESS (tcp://HOST:8786; "
+        "needs `pip install 'poise[dask]'`): against the --connect server if given (it must "
+        "be reachable from the Dask workers), else each Dask worker starts its own",
+    )
+    sim.add_argument(
         "--sweep-push",
         action="store_true",
         help="find by bisection the largest push each thesis ablation and the prioritized "
-        "controller survive, per direction (first scenario)",
+        "controller survive, per direction (first scenario); prints a table, writes "
+        "DIR/sweep_<scenario>.json (every trial) and DIR/sweep_<scenario>.png (survived/fell "
+        "over direction and force, a polar plot per controller)",
     )
     sim.add_argument(
         "--push-body",

@@ -94,7 +94,12 @@ from controller_server.features.setpoint import (
 from controller_server.features.swing_foot import compute_swing_objective
 from controller_server.inverse_dynamics import wrenches_from_point_forces
 from controller_server.models import RobotModel
-from controller_server.solvers.prioritized import Level, PrioritizedSolution, solve_prioritized
+from controller_server.solvers.prioritized import (
+    QP_TIME_BUDGET_S,
+    Level,
+    PrioritizedSolution,
+    solve_prioritized,
+)
 
 __all__ = ["OBJECTIVES", "PrioritizedController", "friction_cone_basis"]
 
@@ -304,6 +309,15 @@ class PrioritizedController(Controller):
             choices=("daqp", "quadprog", "proxqp"),
             doc="QP solver of the constrained levels (via qpsolvers)",
         ),
+        "qp_time_budget_s": ParamSpec(
+            QP_TIME_BUDGET_S,
+            minimum=0.0,
+            maximum=60.0,
+            doc="wall time of a tick's QP solves after which no QP is tried twice (no retry "
+            "settings, no second curvature): bounds a tick on a slow machine, at the price of "
+            "commands that depend on its load near the limits; a batch run that must not (a "
+            "push sweep) raises it (s)",
+        ),
     }
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
@@ -453,6 +467,7 @@ class PrioritizedController(Controller):
             f,
             gain_bound=bounds,
             qp_solver=p["qp_solver"],
+            qp_time_budget_s=p["qp_time_budget_s"],
             check_finite=False,
             residuals=control_input.want_diagnostics,
         )

@@ -105,10 +105,13 @@ def test_foot_slip_and_rotation_are_measured_only_while_supporting(server):
     assert _foot_slip_and_rotation(record) == (0.0, 0.0)
 
 
-def test_push_sweep_bisects_each_direction_and_waits_for_the_robot_to_settle(monkeypatch, capsys):
+def test_push_sweep_bisects_each_direction_and_waits_for_the_robot_to_settle(
+    monkeypatch, capsys, tmp_path
+):
     """The sweep's bookkeeping, with a stand-in run: a robot survives a push up to a
     direction- and controller-dependent force, and only if the run lasts 3 s past it."""
-    import clients.sim.app as app
+    import clients.sim.sweep as sweep_module
+    from clients.pool import RunPool
 
     limits = {("momentum", 1.0): 300.0, ("momentum", -1.0): 150.0, ("prioritized", -1.0): 260.0}
     durations = set()
@@ -123,11 +126,18 @@ def test_push_sweep_bisects_each_direction_and_waits_for_the_robot_to_settle(mon
             limit = limits.get((scenario.controller, np.sign(force_x)), 200.0) * scale
             durations.add(scenario.duration_s)
             self.fell = abs(force_x) > limit
+            self.stopped = self.fall_reason = ""
 
-    monkeypatch.setattr(app, "run_scenario", Run)
-    push = app.PushSpec(body="chest", force_in_world_N=(1, 0, 0), start_s=0.5, duration_s=0.1)
+    monkeypatch.setattr(sweep_module, "run_scenario", Run)
+    push = sweep_module.PushSpec(
+        body="chest", force_in_world_N=(1, 0, 0), start_s=0.5, duration_s=0.1
+    )
     directions = {"behind": (2.0, 0.0, 0.0), "front": (-1.0, 0.0, 0.0)}
-    results = app.sweep_controllers("stand", push, directions, "tcp://unused")
+    with RunPool(endpoint="tcp://unused") as pool:
+        sweep = sweep_module.sweep_controllers(
+            "stand", push, directions, pool, output_dir=tmp_path, progress=False
+        )
+    results = sweep.largest_survived_N()
 
     assert durations == {0.5 + 0.1 + 3.0}  # stand lasts 2 s: extended to settle
     assert results["tracking only"]["behind"] == pytest.approx(150.0, abs=5.0)
@@ -136,6 +146,17 @@ def test_push_sweep_bisects_each_direction_and_waits_for_the_robot_to_settle(mon
     assert results["prioritized (de Lasa 2010)"]["front"] == pytest.approx(260.0, abs=5.0)
     table = capsys.readouterr().out
     assert "weakest" in table and "2.00×" in table  # + linear momentum: 150 / 75
+    # Each bisection: 2000 N fells, then halving to 5 N: 10 trials, the answer the
+    # largest force survived, every smaller force survived and every larger one fell.
+    bisection = sweep.bisections["tracking only"]["front"]
+    assert [force for force, _ in bisection.trials][:3] == [2000.0, 1000.0, 500.0]
+    assert len(bisection.trials) == bisection.max_trials == 10
+    assert all(ok == (force <= 75.0) for force, ok in bisection.trials)
+    written = json.loads((tmp_path / "sweep_stand.json").read_text())
+    assert written["largest_survived_N"] == results
+    assert written["trials"]["tracking only"]["front"][0] == {"force_N": 2000.0, "survived": False}
+    png = (tmp_path / "sweep_stand.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 10_000
 
 
 @pytest.mark.parametrize("delay", [0, 1])

@@ -396,3 +396,25 @@ def test_parameter_changes_reach_what_is_kept_between_ticks():
     controller.set_params({"torque_selection": [1.0] * robot.nv_joints, "priority_torque": 2})
     levels = controller.compute(tick).diagnostics["prioritized"]["priority_levels"]
     assert any("torque" in level["objectives"] for level in levels)
+
+
+def test_the_qp_time_budget_reaches_the_solver(monkeypatch):
+    """`qp_time_budget_s` is the solver's wall-time budget for second tries (default 20 ms)."""
+    import controller_server.controllers.prioritized as prioritized
+    from controller_server.solvers.prioritized import QP_TIME_BUDGET_S
+
+    budgets = []
+    solve = prioritized.solve_prioritized
+
+    def spy(*args, **kwargs):
+        budgets.append(kwargs["qp_time_budget_s"])
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(prioritized, "solve_prioritized", spy)
+    robot = load_robot_model("thesis_humanoid")
+    q, v = near_standing_state(robot, seed=0)
+    compute(robot, q, v)
+    compute(robot, q, v, {"qp_time_budget_s": 2.5})
+    assert budgets == [QP_TIME_BUDGET_S, 2.5]
+    with pytest.raises(InvalidParams):
+        create_controller("prioritized", robot, {"qp_time_budget_s": -1.0})

@@ -5,6 +5,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from protocol import MESSAGE_TYPES, PROTOCOL_VERSION, ErrorCode, ProtocolError, decode, encode
+from protocol.errors import PoiseError
 from protocol.messages import Bye, State
 from tests.protocol.samples import sample_messages
 from tests.protocol.strategies import malformed_maps, msgpack_values
@@ -148,3 +149,22 @@ def test_valid_state_decodes_to_read_only_arrays():
     state = decode(encode(sample_messages()[2]))
     assert isinstance(state, State)
     assert not state.joint_position.flags.writeable
+
+
+class UnknownBody(PoiseError, KeyError):
+    def __init__(self, name, available):
+        self.name, self.available = name, available
+        super().__init__(f"no body {name!r}; bodies: {', '.join(available)}")
+
+
+def test_errors_survive_pickling_as_a_worker_process_raises_them():
+    """A run on a worker process raises its error in the caller as it was, type and fields."""
+    import pickle
+
+    for error in [
+        ProtocolError(ErrorCode.INVALID_FIELD, "params.stiffness", "must be > 0", seq=3),
+        UnknownBody("hed", ["head", "chest"]),
+    ]:
+        copy = pickle.loads(pickle.dumps(error))
+        assert type(copy) is type(error) and str(copy) == str(error)
+        assert vars(copy) == vars(error)

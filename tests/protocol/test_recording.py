@@ -342,3 +342,14 @@ def test_the_client_records_its_conversation(server, tmp_path):
     assert error.code == ErrorCode.INVALID_PARAMS
     times = [entry.time_ns for entry in logged]
     assert times == sorted(times)
+
+
+def test_a_reader_says_how_much_of_the_file_it_has_read():
+    """For a progress bar: 0 before reading, growing with the messages, 1 at the end."""
+    from protocol.recording import read_log
+
+    reader = read_log(Path(__file__).parents[1] / "fixtures" / "replay_momentum_push.mcap")
+    assert reader.fraction_read == 0.0
+    seen = [reader.fraction_read for _ in reader]
+    assert 0.0 < seen[len(seen) // 2] < 1.0 and seen == sorted(seen)
+    assert reader.fraction_read == 1.0
