@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -13,9 +13,10 @@ from clients.server_process import ServerProcess
 from clients.sim.metrics import compute_metrics
 from clients.sim.output import OutputDirectory
 from clients.sim.plots import plot_run, plot_walk_paths
-from clients.sim.runner import RunRecord, run_scenario
+from clients.sim.runner import run_scenario
 from clients.sim.scenario import PushSpec, Scenario, load_scenario
 from clients.sim.series import save_series
+from clients.track import RunObserver
 from clients.visual.gl import choose_headless_gl
 from clients.visual.track import track_of_run
 from clients.visual.video import write_video
@@ -71,7 +72,7 @@ def run_scenarios(
     record_dir: Path | None = None,
     series: bool = False,
     video: bool = False,
-    observer: Callable[[RunRecord], None] | None = None,
+    observer: RunObserver | None = None,
 ) -> list[dict[str, Any]]:
     """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table.
 
@@ -83,7 +84,7 @@ def run_scenarios(
     recorded to ``record_dir/<name>.mcap`` (``poise replay`` replays it); with
     ``series``, its raw time series go to ``<name>.npz`` (:mod:`clients.sim.series`);
     with ``video``, it is rendered to ``<name>.mp4`` (:mod:`clients.visual.video`);
-    ``observer`` sees the record after every tick (the live view, :mod:`clients.visual.live`).
+    ``observer`` sees the run's track after every tick (the live view, :mod:`clients.visual.live`).
 
     Raises:
         ScenarioError: A scenario cannot run (checked for all before the first runs).
