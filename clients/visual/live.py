@@ -131,7 +131,8 @@ class LiveView:
 
     def close(self) -> None:
         """Stop serving."""
-        self._server.stop()
+        with contextlib.redirect_stdout(io.StringIO()):  # viser's "Server stopped"
+            self._server.stop()
 
     def start(self, track: Track) -> None:
         """Show a new run: its robot (in its first state), plots emptied.
