@@ -81,8 +81,8 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
     bridge.add_argument("--report", metavar="FILE", help="write the run's summary as JSON")
     add_view_options(
         bridge,
-        "the measured robot and the server's commands as the bridge runs (served by a process "
-        "of its own: the loop never waits for it)",
+        "the measured robot and the server's commands as the bridge runs",
+        "A process of its own draws and serves it: the loop never waits for it",
     )
     add_client_key_options(bridge)
     bridge.set_defaults(handler=_bridge)

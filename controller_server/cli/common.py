@@ -139,14 +139,15 @@ def add_run_output_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_view_options(
-    parser: argparse.ArgumentParser, shows: str = "each scenario as it runs"
+    parser: argparse.ArgumentParser, shows: str = "each scenario as it runs", note: str = ""
 ) -> None:
-    """``--view`` and ``--view-port``: the live 3-D view in a browser of what ``shows`` says."""
+    """``--view`` and ``--view-port``: the live 3-D view of what ``shows`` says, and a note."""
     parser.add_argument(
         "--view",
         action="store_true",
         help=f"serve a live 3-D view of {shows} at http://127.0.0.1:PORT (robot, COP, CMP, "
-        "support polygon, live plots; open it in a browser); it stops when the command ends",
+        "support polygon, live plots; open it in a browser); it stops when the command ends"
+        + (f". {note}" if note else ""),
     )
     parser.add_argument(
         "--view-port",

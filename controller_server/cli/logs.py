@@ -151,9 +151,9 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
     replay.add_argument("--json", metavar="REPORT", help="also write the report as JSON")
     add_view_options(
         replay,
-        "the log's robot as it is replayed, with this server's commands (as fast as the "
-        "server answers, drawn at most 30 times a second: add --realtime to watch it at the "
-        "recorded pace)",
+        "the log's robot as it is replayed, with this server's commands",
+        "It draws at most 30 frames a second of a replay that runs as fast as the server "
+        "answers: add --realtime to watch it at the recorded pace",
     )
     add_client_key_options(replay)
     replay.set_defaults(handler=_replay)
