@@ -17,6 +17,7 @@ diagnostics ticks); before the first estimate it is not added.
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -79,16 +80,7 @@ class Track:
 
     def empty(self) -> Track:
         """A track of the same run without its ticks (what an observer elsewhere starts from)."""
-        return Track(
-            self.name,
-            self.controller,
-            self.backend,
-            self.model,
-            self.keyframe,
-            self.welcome,
-            pushes=self.pushes,
-            keep_s=self.keep_s,
-        )
+        return dataclasses.replace(self, time_s=[], states=[], commands=[])
 
     def add(
         self, time_s: float, state: RobotState, command: Command, *, base_estimated: bool = False
