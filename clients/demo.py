@@ -10,12 +10,11 @@ prints a summary table.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 
 from clients.client import CurveKeys
 from clients.sim.app import run_scenarios
-from clients.sim.runner import RunRecord
+from clients.track import RunObserver
 
 __all__ = ["DEMO_SCENARIOS", "run_demo"]
 
@@ -32,7 +31,7 @@ def run_demo(
     record_dir: Path | None = None,
     series: bool = False,
     video: bool = False,
-    observer: Callable[[RunRecord], None] | None = None,
+    observer: RunObserver | None = None,
 ) -> int:
     """Run the push scenarios; exit code 0 if the robot stayed up in all of them, else 1."""
     if endpoint is None:

@@ -10,15 +10,19 @@ first divergent ``seq`` and the fields that moved.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
+import tempfile
 import time
 from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from clients.client import ControllerClient, CurveKeys, ServerError
+from clients.track import RunObserver, session_track
 from protocol.errors import PoiseError
 from protocol.messages import (
     PROTOCOL_VERSION,
@@ -182,6 +186,7 @@ def replay_log(
     timeout_s: float = 10.0,
     realtime: bool = False,
     progress: Callable[[float], None] | None = None,
+    observer: RunObserver | None = None,
 ) -> ReplayReport:
     """Replay the first session of a log against the server at ``endpoint``.
 
@@ -197,6 +202,8 @@ def replay_log(
         realtime: Send each request at its recorded time after the first
             (default: as fast as the server answers).
         progress: Called with the fraction of requests sent, now and then.
+        observer: Called after every answered ``state`` with the replay's track: the
+            states of the log and the commands of this server (a live view).
 
     Raises:
         BadLog: Not a log.
@@ -213,18 +220,23 @@ def replay_log(
             'or re-record it (README, "When replay fails")'
         )
     report = ReplayReport(messages_read=reader.messages_read, log_truncated=reader.truncated)
-    with ControllerClient(endpoint, timeout_s=timeout_s, curve=curve) as client:
+    with contextlib.ExitStack() as stack:
+        client = stack.enter_context(ControllerClient(endpoint, timeout_s=timeout_s, curve=curve))
         fields = hello.model_dump(exclude={"type", "version", "seq"})
         fields["params"] = {**hello.params, **(params or {})}
         fields["expected_model_hash"] = recorded.welcome.model_hash
         try:
-            client.connect(**fields)
+            welcome = client.connect(**fields)
         except ServerError as exc:
             raise ReplayError(
                 f"the server refused the recorded hello of {str(path)!r}: {exc.code.name}, "
                 f"{exc.detail} "
                 "(a log replays against the model it was recorded with)"
             ) from None
+        track = None
+        if observer is not None:
+            model_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="poise-replay-"))
+            track = session_track(Path(path).stem, hello, welcome, "replayed", Path(model_dir))
         start_s = time.monotonic()
         first_ns = recorded.requests[0][0] if recorded.requests else 0
         for index, (time_ns, request) in enumerate(recorded.requests):
@@ -233,7 +245,12 @@ def replay_log(
             if progress is not None and index % 100 == 0:
                 progress(index / len(recorded.requests))
             report.requests_sent += 1
-            _replay_one(client, request, recorded.replies.get(request.seq), atol, rtol, report)
+            command = _replay_one(
+                client, request, recorded.replies.get(request.seq), atol, rtol, report
+            )
+            if observer is not None and track is not None and isinstance(request, State):
+                if command is not None and track.add_exchange(request, command):
+                    observer(track)
     if progress is not None:
         progress(1.0)
     return report
@@ -246,16 +263,17 @@ def _replay_one(
     atol: float,
     rtol: float,
     report: ReplayReport,
-) -> None:
-    """Send one recorded request and compare the answer with the recorded one."""
+) -> Command | None:
+    """Send one recorded request, compare the answer with the recorded one, return it."""
     if isinstance(request, SetParams):
         client.set_params(request.params)
-        return
+        return None
     try:
         command = client.step(request)
     except ServerError as exc:
         if isinstance(recorded, Error) and recorded.code == exc.code:
-            return  # the same refusal as recorded
+            return None  # the same refusal as recorded
         raise
     if isinstance(recorded, Command):
         _compare(command, recorded, atol, rtol, report)
+    return command

@@ -43,6 +43,7 @@ from clients.bridge.loop import Bridge, BridgeReport, Pacer
 from clients.bridge.plant import RealTimePacer
 from clients.client import ControllerClient, CurveKeys
 from clients.sim.model_file import describe_model, hello_model
+from clients.track import RunObserver, Track
 
 if TYPE_CHECKING:
     from clients.bridge.emulation import Emulation
@@ -65,6 +66,9 @@ BUS_LOAD_WARNING = 0.8
 
 DIAGNOSTICS_PERIOD_TICKS = 100
 """The bridge asks for diagnostics every this many ticks (they cost the server time)."""
+
+VIEW_KEEP_S = 10.0
+"""Seconds of ticks the bridge keeps for a live view (it plots the last 5 s): a run has no end."""
 
 
 @dataclass
@@ -122,6 +126,7 @@ def open_bridge(
     timeout_s: float = 10.0,
     wall_clock: bool = False,
     imu_source: ImuSource | None = None,
+    observer: RunObserver | None = None,
 ) -> Iterator[BridgeSession]:
     """Connect, check the map against the server, open the buses (or emulate them).
 
@@ -137,6 +142,9 @@ def open_bridge(
             robot then stands still): for timing the loop.
         imu_source: The robot's IMU and contact flags, for ``base_state =
             "imu"`` with ``[imu] source = "external"`` (real hardware).
+        observer: Sees the measured robot and the server's commands after
+            every answered tick (a live view); it must never wait
+            (:class:`~clients.visual.live_process.LiveViewProcess`).
 
     Raises:
         BridgeConfigError: The map does not match the server's joints, or a
@@ -222,6 +230,18 @@ def open_bridge(
             in_force.get(name, {}).get("reply_timeout_s", spec.reply_timeout_s)
             for name, spec in config.buses.items()
         )
+        track = None
+        if observer is not None:
+            track = Track(
+                name=Path(settings.model).stem,
+                controller=welcome.controller,
+                backend="emulated bridge" if emulate else "bridge",
+                model=settings.model,
+                keyframe=None,
+                welcome=welcome,
+                pushes=config.emulation.pushes if emulate else (),
+                keep_s=VIEW_KEEP_S,
+            )
         bridge = Bridge(
             settings,
             joint_map,
@@ -234,6 +254,8 @@ def open_bridge(
             timeout_s,
             margin_s,
             imu_max_sample_age_s=config.imu_settings.max_sample_age_s,
+            observer=observer,
+            track=track,
         )
         yield BridgeSession(bridge, emulation)
 

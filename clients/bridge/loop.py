@@ -54,6 +54,7 @@ from clients.bridge.safety import (
 )
 from clients.client import ControllerClient, ServerError, ServerTimeout
 from clients.state import RobotState
+from clients.track import RunObserver, Track
 from protocol.errors import PoiseError
 from protocol.messages import Command
 
@@ -215,6 +216,11 @@ class Bridge:
             ``watchdog_s`` of the last valid command (an exchange's worth).
         imu_max_sample_age_s: With an IMU, the same sample for longer than this (s)
             latches the safe state (``[imu] max_sample_age_s``).
+        observer: Called with ``track`` after every tick the server answered:
+            it must return at once (the live view: a
+            :class:`~clients.visual.live_process.LiveViewProcess`).
+        track: Where those ticks go: the measured state (with an IMU, the
+            joints and the base the server estimates) and the server's command.
     """
 
     def __init__(
@@ -230,8 +236,12 @@ class Bridge:
         connect_timeout_s: float = 10.0,
         safe_margin_s: float = 0.003,
         imu_max_sample_age_s: float = 0.02,
+        observer: RunObserver | None = None,
+        track: Track | None = None,
     ):
         self.connect_timeout_s = connect_timeout_s
+        self.observer = observer
+        self.track = track
         self.settings = settings
         self.joint_map = joint_map
         self.buses = dict(buses)
@@ -521,6 +531,7 @@ class Bridge:
                 self.joint_position_rad.copy(), self.joint_velocity_rad_s.copy(), *_NO_BASE
             )
             state = joints.to_imu_message(time_s, reading.contact_flags, reading.imu)
+            seen, seen_time_s = joints, time_s
         else:
             measured = RobotState(
                 self.joint_position_rad.copy(),
@@ -530,7 +541,7 @@ class Bridge:
                 reading.linear_velocity_base_in_world,
                 reading.angular_velocity_base_in_base,
             )
-            sent = measured
+            sent, seen, seen_time_s = measured, measured, time_s
             if self._held is not None:  # the command decided now acts from the next tick
                 sent = measured.predicted(self.pacer.period_s, self.model, self._held)
                 time_s += self.pacer.period_s
@@ -550,6 +561,10 @@ class Bridge:
             self.report.invalid_commands += 1
             log.warning("the server refused the state: %s %s", exc.code.name, exc.detail)
             return None
+        if self.observer is not None and self.track is not None:
+            imu = isinstance(reading, ImuBaseReading)
+            if self.track.add(seen_time_s, seen, command, base_estimated=imu):
+                self.observer(self.track)
         return command
 
     def _on_every_bus(self, call: Callable[[str, ActuatorBus], _T]) -> dict[str, _T | BusError]:

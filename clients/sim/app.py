@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +17,7 @@ from clients.sim.plots import plot_run, plot_walk_paths
 from clients.sim.runner import RunRecord, run_scenario
 from clients.sim.scenario import Scenario, load_scenario
 from clients.sim.series import save_series
+from clients.track import RunObserver
 from clients.visual.gl import choose_headless_gl
 from clients.visual.track import track_of_run
 from clients.visual.video import write_video
@@ -44,7 +45,7 @@ def run_scenarios(
     record_dir: Path | None = None,
     series: bool = False,
     video: bool = False,
-    observer: Callable[[RunRecord], None] | None = None,
+    observer: RunObserver | None = None,
     workers: int = 1,
     dask: str | None = None,
 ) -> list[dict[str, Any]]:
@@ -65,7 +66,7 @@ def run_scenarios(
     Dask, on the worker's file system); with ``series``, its raw time series
     go to ``<name>.npz`` (:mod:`clients.sim.series`); with ``video``, it is
     rendered to ``<name>.mp4`` (:mod:`clients.visual.video`, here);
-    ``observer`` sees the record after every tick (the live view,
+    ``observer`` sees the run's track after every tick (the live view,
     :mod:`clients.visual.live`): it needs the runs in this process (``workers=1``).
 
     Raises:
@@ -124,7 +125,7 @@ class _ScenarioTasks:
         self.record_dir = record_dir
         self.series = series
         self.video = video
-        self.observer: Callable[[RunRecord], None] | None = None
+        self.observer: RunObserver | None = None
         self.started = 0
         self.done: dict[int, dict[str, Any]] = {}
         self.interrupted = False

@@ -23,7 +23,6 @@ from __future__ import annotations
 import difflib
 import os
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,6 +37,7 @@ from clients.sim.imu import SimulatedImu
 from clients.sim.model_file import describe_model, hello_model
 from clients.sim.scenario import Scenario
 from clients.state import RobotState
+from clients.track import RunObserver, Track
 from protocol.messages import Command, ContactSpec, Diagnostics, Welcome
 
 __all__ = [
@@ -49,6 +49,7 @@ __all__ = [
     "run_scenario",
     "standing_state",
     "support_flags",
+    "track_of_run",
 ]
 
 FALL_TILT_RAD = np.radians(60.0)
@@ -189,6 +190,23 @@ class RunRecord:
         return self.simulated_s / self.wall_time_s if self.wall_time_s > 0 else float("nan")
 
 
+def track_of_run(record: RunRecord) -> Track:
+    """The track of a simulator run (its true states): it shares the record's lists, so it grows."""
+    scenario = record.scenario
+    return Track(
+        name=scenario.name,
+        controller=scenario.controller,
+        backend=scenario.backend,
+        model=scenario.model,
+        keyframe=scenario.keyframe,
+        welcome=record.welcome,
+        time_s=record.time_s,
+        states=record.states,
+        commands=record.commands,
+        pushes=scenario.pushes,
+    )
+
+
 def fall_reason(state: RobotState, standing_height_m: float, non_foot_contact: bool) -> str:
     """Why the robot in ``state`` has fallen, or ``""`` if it has not."""
     if non_foot_contact:
@@ -251,7 +269,7 @@ def run_scenario(
     timeout_s: float = 10.0,
     curve: CurveKeys | None = None,
     log_path: str | os.PathLike[str] | None = None,
-    observer: Callable[[RunRecord], None] | None = None,
+    observer: RunObserver | None = None,
 ) -> RunRecord:
     """Simulate ``scenario`` against the server at ``endpoint``.
 
@@ -262,7 +280,7 @@ def run_scenario(
         timeout_s: Per-request timeout.
         curve: CURVE keys for a server that requires them.
         log_path: MCAP file to record the conversation with the server to.
-        observer: Called with the record after every tick is added to it (a live view).
+        observer: Called with the run's track after every tick is added to it (a live view).
     """
     backend = make_backend(scenario)
     pushes = [push.to_push() for push in scenario.pushes]
@@ -298,6 +316,7 @@ def run_scenario(
             imu.reset(backend.state(), backend.time_s)
         standing_height_m = welcome.standing_position_base_in_world[2]
         record = RunRecord(scenario, welcome, model_notes=list(backend.conversions))
+        track = track_of_run(record)
         ticks = round(scenario.duration_s * scenario.control_rate_hz)
         steps = scenario.physics_steps_per_control_tick
         changes = list(scenario.param_changes)
@@ -355,7 +374,7 @@ def run_scenario(
                 record.commands.append(command)
                 record.contact_flags.append(flags)
                 if observer is not None:
-                    observer(record)
+                    observer(track)
                 state = backend.state()  # after the step: checked now, sent next tick
                 reason = fall_reason(state, standing_height_m, non_foot_contact)
                 if reason:

@@ -15,6 +15,7 @@ wall-clock second, so a 1 kHz run costs the loop little.
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import io
 import logging
@@ -24,10 +25,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from clients.sim.runner import RunRecord
-from clients.visual.overlays import overlays_at
+from clients.track import Track
+from clients.visual.overlays import TickOverlays, overlays_at
 from clients.visual.scene import RobotScene
-from clients.visual.track import Track, track_of_run
 
 __all__ = ["PLOT_WINDOW_S", "ROBOT_RGB", "VIEW_HZ", "LiveView"]
 
@@ -37,6 +37,8 @@ PLOT_HZ = 5.0
 """Most plot updates per wall-clock second (each sends the window's data)."""
 PLOT_WINDOW_S = 5.0
 """Seconds of simulated time the live plots show."""
+PLOT_POINTS = 500
+"""Most points a plot shows (the diagnostics in its window, evenly thinned)."""
 ROBOT_RGB = (60, 100, 190)
 """Colour of the robot's grey geoms (three.js lights a light grey to near white on white)."""
 ARROW_RGB = (230, 30, 20)
@@ -90,7 +92,7 @@ def _rgb(rgba: np.ndarray) -> tuple[int, int, int]:
 
 
 class LiveView:
-    """``view = LiveView(port)``, then ``view.observe(record)`` every tick; ``view.close()``.
+    """``view = LiveView(port)``, then ``view.observe(track)`` every tick; ``view.close()``.
 
     Args:
         host: Interface to serve on (default loopback only).
@@ -108,9 +110,18 @@ class LiveView:
         self._caption = self._server.gui.add_markdown("waiting for a run …")
         self._plots: list[Any] = []
         self._bodies: list[Any] = []
-        self._overlay_nodes: list[Any] = []
+        # COP and CMP markers move (created once); the polygon and the push arrows are
+        # made anew when their number of segments changes.
+        self._markers = [
+            self._server.scene.add_icosphere(
+                f"/overlays/{name}", radius=0.03, color=rgb, visible=False
+            )
+            for name, rgb in (("cop", COP_RGB), ("cmp", CMP_RGB))
+        ]
+        self._polygon: Any = None
+        self._arrows: Any = None
         self._scene: RobotScene | None = None
-        self._record: RunRecord | None = None
+        self._track: Track | None = None
         self._last_show_s = self._last_plot_s = -np.inf
 
     @property
@@ -120,7 +131,8 @@ class LiveView:
 
     def close(self) -> None:
         """Stop serving."""
-        self._server.stop()
+        with contextlib.redirect_stdout(io.StringIO()):  # viser's "Server stopped"
+            self._server.stop()
 
     def start(self, track: Track) -> None:
         """Show a new run: its robot (in its first state), plots emptied.
@@ -162,15 +174,19 @@ class LiveView:
         if len(track.states):
             self.show(track, len(track.states) - 1, force=True)
 
-    def observe(self, record: RunRecord) -> None:
-        """``run_scenario``'s observer: a new run is started, a running one shown at its end."""
-        if not record.states:
+    def observe(self, track: Track) -> None:
+        """A run's observer (:data:`~clients.track.RunObserver`): shows its last tick.
+
+        A new track object is a new run, started; a growing one is shown at
+        most ``VIEW_HZ`` times a second (the ticks between are not drawn).
+        """
+        if not track.states:
             return
-        if record is not self._record:
-            self._record = record
-            self.start(track_of_run(record))
+        if track is not self._track:
+            self._track = track
+            self.start(track)
         elif time.monotonic() - self._last_show_s >= 1.0 / VIEW_HZ:
-            self.show(track_of_run(record), len(record.states) - 1)
+            self.show(track, len(track.states) - 1)
 
     def _add_plot(self, title: str, labels: tuple[str, ...]) -> Any:
         """A uPlot chart of ``labels`` over simulated time (the x axis is not a date)."""
@@ -205,66 +221,65 @@ class LiveView:
             for body, node in enumerate(self._bodies, start=1):
                 node.position = scene.data.xpos[body].copy()
                 node.wxyz = scene.data.xquat[body].copy()
-            for node in self._overlay_nodes:
-                node.remove()
-            self._overlay_nodes = []
-            if overlays.pushes:
-                segments = np.array([[a.tail_in_world, a.head_in_world] for a in overlays.pushes])
-                self._overlay_nodes.append(
-                    server.scene.add_arrows(
-                        "/overlays/pushes",
-                        segments,
-                        ARROW_RGB,
-                        shaft_radius=0.012,
-                        head_radius=0.03,
-                        head_length=0.06,
-                    )
-                )
-            polygon = overlays.support_polygon
-            if len(polygon):
-                segments = np.stack([polygon, np.roll(polygon, -1, axis=0)], axis=1)
-                self._overlay_nodes.append(
-                    server.scene.add_line_segments(
-                        "/overlays/support_polygon", segments, POLYGON_RGB, thickness=0.008
-                    )
-                )
-            for name, point, rgb in (
-                ("cop", overlays.center_of_pressure, COP_RGB),
-                ("cmp", overlays.centroidal_moment_pivot, CMP_RGB),
-            ):
-                if point is not None:
-                    self._overlay_nodes.append(
-                        server.scene.add_icosphere(
-                            f"/overlays/{name}", radius=0.03, color=rgb, position=point
-                        )
-                    )
+            self._draw_overlays(overlays)
             self._caption.content = f"**{overlays.caption}**"
         if force or now - self._last_plot_s >= 1.0 / PLOT_HZ:
             self._last_plot_s = now
             self._update_plots(track, tick)
 
+    def _draw_overlays(self, overlays: TickOverlays) -> None:
+        """Pushes, support polygon, COP and CMP of one tick (within ``server.atomic()``)."""
+        scene = self._server.scene
+        if self._arrows is not None:
+            self._arrows.remove()
+            self._arrows = None
+        if overlays.pushes:
+            self._arrows = scene.add_arrows(
+                "/overlays/pushes",
+                np.array([[a.tail_in_world, a.head_in_world] for a in overlays.pushes]),
+                ARROW_RGB,
+                shaft_radius=0.012,
+                head_radius=0.03,
+                head_length=0.06,
+            )
+        polygon = overlays.support_polygon
+        segments = np.stack([polygon, np.roll(polygon, -1, axis=0)], axis=1)
+        if self._polygon is not None and len(self._polygon.points) != len(segments):
+            self._polygon.remove()
+            self._polygon = None
+        if self._polygon is not None:
+            self._polygon.points = segments
+        elif len(segments):
+            self._polygon = scene.add_line_segments(
+                "/overlays/support_polygon", segments, POLYGON_RGB, thickness=0.008
+            )
+        points = (overlays.center_of_pressure, overlays.centroidal_moment_pivot)
+        for marker, point in zip(self._markers, points, strict=True):
+            marker.visible = point is not None
+            if point is not None:
+                marker.position = point
+
     def _update_plots(self, track: Track, tick: int) -> None:
-        start_s = float(track.time_s[tick]) - PLOT_WINDOW_S
-        rows = [
-            (float(track.time_s[i]), command.diagnostics)
-            for i, command in enumerate(track.commands[: tick + 1])
-            if command.diagnostics is not None and track.time_s[i] >= start_s
-        ]
-        if not rows:
+        """The plots over the last ``PLOT_WINDOW_S`` s, at most ``PLOT_POINTS`` points each."""
+        first = bisect.bisect_left(track.time_s, float(track.time_s[tick]) - PLOT_WINDOW_S)
+        diagnosed = [i for i in range(first, tick + 1) if track.commands[i].diagnostics is not None]
+        if not diagnosed:
             return
-        times = np.array([t for t, _ in rows])
+        diagnosed = diagnosed[:: -(-len(diagnosed) // PLOT_POINTS)]
+        times = np.array([track.time_s[i] for i in diagnosed], dtype=float)
+        rows = [d for i in diagnosed if (d := track.commands[i].diagnostics) is not None]
         ground = np.array(
             [
                 (d.position_com_in_world[0], d.center_of_pressure[0], d.centroidal_moment_pivot[0])
-                for _, d in rows
+                for d in rows
             ]
         )
-        momenta = np.array(
-            [
-                (np.linalg.norm(d.linear_momentum), np.linalg.norm(d.angular_momentum))
-                for _, d in rows
-            ]
-        )
+        linear = np.array([d.linear_momentum for d in rows], dtype=float)
+        angular = np.array([d.angular_momentum for d in rows], dtype=float)
         ground_plot, momenta_plot = self._plots
         ground_plot.data = (times, *ground.T)
-        momenta_plot.data = (times, *momenta.T)
+        momenta_plot.data = (
+            times,
+            np.linalg.norm(linear, axis=1),
+            np.linalg.norm(angular, axis=1),
+        )

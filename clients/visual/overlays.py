@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clients.visual.track import Track
+from clients.track import Track
 
 __all__ = ["ARROW_M_PER_N", "Arrow", "TickOverlays", "overlays_at"]
 

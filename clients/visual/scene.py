@@ -14,7 +14,7 @@ import numpy as np
 
 from clients.sim.mujoco_backend import MujocoBackend
 from clients.state import RobotState
-from clients.visual.track import Track
+from clients.track import Track
 
 __all__ = ["RobotScene"]
 

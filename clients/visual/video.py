@@ -23,10 +23,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from clients.track import Track
 from clients.visual.gl import open_renderer
 from clients.visual.overlays import TickOverlays, overlays_at
 from clients.visual.scene import RobotScene
-from clients.visual.track import Track
 
 __all__ = [
     "ARROW_RGBA",

@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from controller_server.cli.common import add_client_key_options, check_endpoint_option, curve_keys
+from controller_server.cli.common import (
+    add_client_key_options,
+    add_view_options,
+    check_endpoint_option,
+    curve_keys,
+    live_view,
+)
 
 __all__ = ["add_parsers"]
 
@@ -18,7 +24,7 @@ def _bridge(args: argparse.Namespace) -> int:
     check_endpoint_option("--connect", args.connect)
     config = load_bridge_config(args.config)
     curve = curve_keys(args)
-    with server_endpoint(args.connect) as endpoint:
+    with live_view(args, own_process=True) as observer, server_endpoint(args.connect) as endpoint:
         run = run_bridge(
             config,
             endpoint,
@@ -27,6 +33,7 @@ def _bridge(args: argparse.Namespace) -> int:
             record=Path(args.record) if args.record else None,
             curve=curve,
             operator=stdin_operator(),
+            observer=observer,
         )
     print(format_report(run))
     if args.report:
@@ -72,5 +79,10 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         "--record", metavar="FILE", help="record the conversation with the server (MCAP)"
     )
     bridge.add_argument("--report", metavar="FILE", help="write the run's summary as JSON")
+    add_view_options(
+        bridge,
+        "the measured robot and the server's commands as the bridge runs",
+        "A process of its own draws and serves it: the loop never waits for it",
+    )
     add_client_key_options(bridge)
     bridge.set_defaults(handler=_bridge)

@@ -53,6 +53,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     from clients.sim.errors import ScenarioError, UnsupportedModel
     from clients.sim.output import OutputBusy
     from clients.visual.gl import RenderingUnavailable
+    from clients.visual.live_process import LiveViewError
     from controller_server.models.description import DescriptionError
     from protocol.endpoints import InvalidEndpoint
     from protocol.errors import ErrorCode
@@ -71,7 +72,8 @@ def as_usage_error(exc: Exception) -> UsageError | None:
         | BridgeStartError
         | BusError
         | DescriptionError
-        | RenderingUnavailable,
+        | RenderingUnavailable
+        | LiveViewError,
     ):
         return UsageError(str(exc))
     return None
@@ -138,14 +140,16 @@ def add_run_output_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_view_options(parser: argparse.ArgumentParser) -> None:
-    """``--view`` and ``--view-port``: the live 3-D view in a browser."""
+def add_view_options(
+    parser: argparse.ArgumentParser, shows: str = "each scenario as it runs", note: str = ""
+) -> None:
+    """``--view`` and ``--view-port``: the live 3-D view of what ``shows`` says, and a note."""
     parser.add_argument(
         "--view",
         action="store_true",
-        help="serve a live 3-D view of each scenario as it runs at http://127.0.0.1:PORT "
-        "(robot, pushes, COP, CMP, support polygon, live plots; open it in a browser); it "
-        "stops when the command ends",
+        help=f"serve a live 3-D view of {shows} at http://127.0.0.1:PORT (robot, COP, CMP, "
+        "support polygon, live plots; open it in a browser); it stops when the command ends"
+        + (f". {note}" if note else ""),
     )
     parser.add_argument(
         "--view-port",
@@ -157,16 +161,28 @@ def add_view_options(parser: argparse.ArgumentParser) -> None:
 
 
 @contextlib.contextmanager
-def live_view(args: argparse.Namespace) -> Iterator[Callable[[Any], None] | None]:
-    """With ``--view``: serve the live view and yield its run observer; else yield ``None``."""
+def live_view(
+    args: argparse.Namespace, own_process: bool = False
+) -> Iterator[Callable[[Any], None] | None]:
+    """With ``--view``: serve the live view and yield its run observer; else yield ``None``.
+
+    With ``own_process``, the view runs in a child process and its observer
+    never waits (for a loop with deadlines: the bridge's).
+    """
     if not args.view:
         yield None
         return
     if not 1 <= args.view_port <= 65535:
         raise UsageError(f"--view-port {args.view_port}: write a TCP port, 1 to 65535")
-    from clients.visual.live import LiveView
+    view: Any
+    if own_process:
+        from clients.visual.live_process import LiveViewProcess
 
-    view = LiveView(port=args.view_port)
+        view = LiveViewProcess(port=args.view_port)
+    else:
+        from clients.visual.live import LiveView
+
+        view = LiveView(port=args.view_port)
     print(f"live view: {view.url}", flush=True)
     try:
         yield view.observe

@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from controller_server.cli.common import UsageError, add_client_key_options, curve_keys
+from controller_server.cli.common import (
+    UsageError,
+    add_client_key_options,
+    add_view_options,
+    curve_keys,
+    live_view,
+)
 
 __all__ = ["add_parsers"]
 
@@ -28,7 +34,11 @@ def _replay(args: argparse.Namespace) -> int:
         except json.JSONDecodeError:
             params[name] = value  # a bare word: a text parameter
     try:
-        with server_endpoint(args.connect) as endpoint, ProgressBar(Path(args.log).name) as bar:
+        with (
+            live_view(args) as observer,
+            server_endpoint(args.connect) as endpoint,
+            ProgressBar(Path(args.log).name) as bar,
+        ):
             report = replay_log(
                 args.log,
                 endpoint,
@@ -38,6 +48,7 @@ def _replay(args: argparse.Namespace) -> int:
                 curve=curve_keys(args),
                 realtime=args.realtime,
                 progress=bar,
+                observer=observer,
             )
     except (BadLog, ReplayError) as exc:
         raise UsageError(str(exc)) from None
@@ -144,6 +155,12 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="send each state at its recorded time (default: as fast as the server answers)",
     )
     replay.add_argument("--json", metavar="REPORT", help="also write the report as JSON")
+    add_view_options(
+        replay,
+        "the log's robot as it is replayed, with this server's commands",
+        "It draws at most 30 frames a second of a replay that runs as fast as the server "
+        "answers: add --realtime to watch it at the recorded pace",
+    )
     add_client_key_options(replay)
     replay.set_defaults(handler=_replay)
 

@@ -1,15 +1,21 @@
-"""The live 3-D view in a real headless Chromium (issue 20, part 2).
+"""The live 3-D view of `sim`, `replay` and `bridge` (issue 20, part 2).
 
 ``poise sim … --view`` runs a pushed scenario against a real server process
 and serves the view; Chromium (Debian's ``chromium``, driven over the
 DevTools protocol) loads the page while the run goes on, and two screenshots
-taken apart show the robot drawn in its colour and moving. Without Chromium
-the test is skipped, saying how to install it.
+taken apart show the robot drawn in its colour and moving. ``poise replay
+LOG --view --realtime`` does the same for a log whose robot sways.
+Without Chromium those tests are skipped, saying how to install it.
+``poise bridge … --emulate --view`` is checked without a browser: a
+WebSocket client of the page receives the robot's poses while the loop
+runs, and the loop's own report shows it ran as it does without a view.
 """
 
 import base64
+import dataclasses
 import io
 import json
+import re
 import select
 import shutil
 import socket
@@ -18,10 +24,17 @@ import time
 import urllib.request
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
+import viser
+import zstandard
 from PIL import Image
 
+from clients.client import ControllerClient
+from clients.state import RobotState
+from protocol.messages import Hello
+from protocol.recording import Recorder
 from tests.helpers import POISE
 
 pytestmark = pytest.mark.e2e
@@ -127,46 +140,172 @@ def read_line_with(process: subprocess.Popen, prefix: str) -> str:
             if line.startswith(prefix):
                 return line[len(prefix) :].strip()
             assert line or process.poll() is None, process.stderr.read()
-    raise AssertionError(f"`poise sim --view` printed no {prefix!r} line")
+    raise AssertionError(f"`poise {process.args[3]} --view` printed no {prefix!r} line")
 
 
-@pytest.mark.skipif(
+def poise_with_view(arguments: list[str], cwd: Path, port: int, **options) -> subprocess.Popen:
+    """``poise ARGUMENTS --view --view-port PORT`` in the background, its output piped."""
+    return subprocess.Popen(
+        [*POISE, *arguments, "--view", "--view-port", str(port)],
+        cwd=cwd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **{"stdin": subprocess.DEVNULL, **options},
+    )
+
+
+def scene_changed_pixels(first: np.ndarray, later: np.ndarray) -> int:
+    """Pixels of the 3-D scene that changed between two screenshots (the plots left out)."""
+    difference = np.abs(later[:, SCENE_COLUMNS].astype(int) - first[:, SCENE_COLUMNS].astype(int))
+    return int(np.count_nonzero(difference.max(axis=2) > 40))
+
+
+def assert_the_page_shows_the_robot_moving(command: subprocess.Popen, tmp_path: Path) -> None:
+    """Chromium loads the page ``command`` serves: the robot is drawn, then drawn elsewhere."""
+    port = command.args[-1]
+    try:
+        url = read_line_with(command, "live view: ")
+        assert url == f"http://127.0.0.1:{port}"
+        browser = DevTools(tmp_path / "chromium-profile", url)
+        try:
+            deadline = time.monotonic() + WAIT_S
+            first = browser.screenshot()
+            while robot_pixels(first) < 1000:
+                assert time.monotonic() < deadline, "the page never drew the robot"
+                time.sleep(0.5)
+                first = browser.screenshot()
+            later = first
+            while scene_changed_pixels(first, later) < 50:
+                assert time.monotonic() < deadline, "the robot did not move on the page"
+                time.sleep(0.5)
+                later = browser.screenshot()
+            assert robot_pixels(later) >= 1000
+            assert command.poll() is None, "the run ended before the screenshots: make it longer"
+            Image.fromarray(first).save(tmp_path / "first.png")
+            Image.fromarray(later).save(tmp_path / "later.png")
+        finally:
+            browser.close()
+    finally:
+        command.terminate()
+        command.wait(timeout=60)
+
+
+needs_chromium = pytest.mark.skipif(
     CHROMIUM is None,
     reason="the live view's browser test needs Chromium: `apt-get install chromium` (Debian)",
 )
+
+
+@needs_chromium
 def test_the_page_shows_the_robot_moving_while_a_run_goes_on(tmp_path):
     (tmp_path / "view_push.toml").write_text(SCENARIO)
-    port = free_port()
-    sim = subprocess.Popen(
-        [*POISE, "sim", "view_push.toml", "--view", "--view-port", str(port), "--output", "out"],
-        cwd=tmp_path,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        stdin=subprocess.DEVNULL,
-        text=True,
+    sim = poise_with_view(["sim", "view_push.toml", "--output", "out"], tmp_path, free_port())
+    assert_the_page_shows_the_robot_moving(sim, tmp_path)
+
+
+def write_swaying_log(path: Path, endpoint: str, duration_s: float, rate_hz: float) -> None:
+    """A log of the thesis humanoid standing, its base swaying ±0.15 m, recorded at ``rate_hz``.
+
+    The handshake is a real server's; the states are written with the log
+    times of a client that sent them at ``rate_hz`` (no commands: nothing is
+    compared), so ``poise replay --realtime`` takes ``duration_s`` to send them.
+    """
+    hello = Hello(model="thesis_humanoid", diagnostics_period_ticks=10)
+    with ControllerClient(endpoint) as client:
+        welcome = client.connect("thesis_humanoid", diagnostics_period_ticks=10)
+    start_ns = time.time_ns()
+    with Recorder(path) as recorder:
+        recorder.record(hello, "sent", start_ns)
+        recorder.record(welcome, "received", start_ns)
+        standing = RobotState.standing(welcome)
+        for tick in range(round(duration_s * rate_hz)):
+            time_s = tick / rate_hz
+            sway = np.array([0.15 * np.sin(np.pi * time_s), 0.0, 0.0])
+            state = dataclasses.replace(
+                standing, position_base_in_world=standing.position_base_in_world + sway
+            )
+            message = state.to_message(time_s, [True] * len(welcome.contacts))
+            recorder.record(
+                message.model_copy(update={"seq": tick + 1}),
+                "sent",
+                start_ns + round(1e9 * (0.01 + time_s)),
+            )
+
+
+@needs_chromium
+def test_the_page_shows_the_logs_robot_moving_while_it_is_replayed(tmp_path, server):
+    log = tmp_path / "sway.mcap"
+    write_swaying_log(log, server.endpoint, duration_s=60.0, rate_hz=50.0)
+    replay = poise_with_view(
+        ["replay", str(log), "--realtime", "--connect", server.endpoint], tmp_path, free_port()
     )
-    browser = None
+    assert_the_page_shows_the_robot_moving(replay, tmp_path)
+
+
+def scene_updates(url: str, duration_s: float) -> dict[str, list]:
+    """Each robot body's positions (``/robot/bodyN``) sent to a WebSocket client in ``duration_s``.
+
+    Reads viser's wire format (per frame: sizes, then zstd-compressed msgpack
+    of the messages; viser's own client speaks it with subprotocol ``viser-vVERSION``).
+    """
+    from websockets.sync.client import connect
+
+    positions: dict[str, list] = {}
+    decompress = zstandard.ZstdDecompressor()
+    with connect(
+        url.replace("http://", "ws://"),
+        subprotocols=[f"viser-v{viser.__version__}"],
+        max_size=None,
+        open_timeout=WAIT_S,
+    ) as socket:
+        end = time.monotonic() + duration_s
+        while time.monotonic() < end:
+            try:
+                frame = socket.recv(timeout=1.0)
+            except TimeoutError:
+                continue
+            size = int.from_bytes(frame[:8], "little")
+            compressed = int.from_bytes(frame[8:16], "little")
+            inner = decompress.decompress(frame[16 : 16 + compressed], max_output_size=size)
+            for message in msgspec.msgpack.decode(inner)["messages"]:
+                name = message.get("name", "")
+                body = re.fullmatch(r"/robot/body\d+", name)
+                if message.get("type") == "SetPositionMessage" and body:
+                    positions.setdefault(name, []).append(tuple(message["position"]))
+    return positions
+
+
+EXAMPLE_MAP = Path(__file__).parents[2] / "examples" / "bridge" / "revolute_humanoid_mit.toml"
+
+
+def test_the_bridge_page_streams_the_robot_while_the_loop_runs(tmp_path, server):
+    report = tmp_path / "report.json"
+    bridge = poise_with_view(
+        ["bridge", str(EXAMPLE_MAP), "--emulate", "--duration", "0", "--connect",
+         server.endpoint, "--report", str(report)],
+        tmp_path,
+        free_port(),
+        stdin=subprocess.PIPE,
+    )  # fmt: skip
     try:
-        url = read_line_with(sim, "live view: ")
-        assert url == f"http://127.0.0.1:{port}"
-        browser = DevTools(tmp_path / "chromium-profile", url)
-        deadline = time.monotonic() + WAIT_S
-        first = browser.screenshot()
-        while robot_pixels(first) < 1000:
-            assert time.monotonic() < deadline, "the page never drew the robot"
-            time.sleep(0.5)
-            first = browser.screenshot()
-        later = first
-        while np.count_nonzero(np.abs(later.astype(int) - first.astype(int)).max(axis=2) > 40) < 50:
-            assert time.monotonic() < deadline, "the robot did not move on the page"
-            time.sleep(0.5)
-            later = browser.screenshot()
-        assert robot_pixels(later) >= 1000
-        assert sim.poll() is None, "the run ended before the screenshots: make it longer"
-        Image.fromarray(first).save(tmp_path / "first.png")
-        Image.fromarray(later).save(tmp_path / "later.png")
+        url = read_line_with(bridge, "live view: ")
+        positions = scene_updates(url, duration_s=6.0)
+        bridge.stdin.write("quit\n")
+        bridge.stdin.flush()
+        stdout, stderr = bridge.communicate(timeout=WAIT_S)
     finally:
-        if browser is not None:
-            browser.close()
-        sim.terminate()
-        sim.wait(timeout=60)
+        bridge.kill()
+    assert bridge.returncode == 0, stderr
+    assert "stopped: quit; safe state latched 0 time(s)" in stdout, stdout
+    # Every body of the robot was posed, again and again, and the robot moved on the page.
+    assert len(positions) >= 15, sorted(positions)
+    assert all(len(seen) >= 10 for seen in positions.values()), positions
+    assert any(len(set(seen)) > 1 for seen in positions.values())
+    data = json.loads(report.read_text())
+    print({key: value for key, value in data.items() if key != "links"})
+    assert data["latches"] == [] and data["emulation"]["fell"] is False
+    assert data["ticks"] >= 100 and data["invalid_commands"] == 0
+    # Each tick had its command or counted a server timeout (a loaded machine's, not the view's:
+    # in simulated time the loop waits 47 ms of the wall clock for each).
+    assert data["commands"] + data["server_timeouts"] - data["ticks"] in (0, 1), data
