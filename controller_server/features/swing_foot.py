@@ -13,8 +13,12 @@ Its desired accelerations come from target objectives (eq. 6–7):
   (the paper's ``y_r⊥ = h`` then 0), and after ``T`` keeps moving down at that
   speed until the foot touches: a late foot is pressed down, not held above
   the ground;
-* the rotation is a setpoint (eq. 4) toward ``R_r`` (flat, facing the walk's
-  heading): ``ω̇_d = k_p log(R_r Rᵀ) − k_v ω``.
+* the rotation reaches ``R_r`` (flat, facing the walk's heading) at rest at
+  ``T``: a target objective on the rotation vector ``e = log(R_r Rᵀ)`` (world
+  axes), ``−e → 0`` with ``ω`` as its rate (exact to first order in ``e``; a
+  foot is off by a few degrees). A setpoint ``ω̇_d = k_p e − k_v ω`` (eq. 4) at
+  ``k_p`` = 100 landed a foot that left the ground on its toe (MuJoCo) still
+  3–4° toe-down, heel 14–16 mm up: the next stance began on the toe;
 
 Each target objective hands over to a setpoint on its end point for the last
 :data:`TARGET_HANDOVER_S` (re-planned every tick, eq. 7 amplifies what is
@@ -34,7 +38,13 @@ import pinocchio as pin
 from controller_server.features.objective import Objective
 from controller_server.features.setpoint import setpoint_acceleration, target_acceleration
 
-__all__ = ["TARGET_HANDOVER_S", "SwingTarget", "compute_swing_objective", "swing_acceleration"]
+__all__ = [
+    "TARGET_HANDOVER_S",
+    "SwingTarget",
+    "compute_swing_objective",
+    "swing_acceleration",
+    "swing_angular_acceleration",
+]
 
 TARGET_HANDOVER_S = 0.05
 """The target objectives hand over to a setpoint this long before their end (s)."""
@@ -112,6 +122,31 @@ def swing_acceleration(
     return desired
 
 
+def swing_angular_acceleration(
+    target: SwingTarget,
+    time_s: float,
+    rotation: np.ndarray,
+    angular_velocity: np.ndarray,
+    stiffness: float,
+    damping: float,
+) -> np.ndarray:
+    """``ω̇_d`` of the frame (world, rad/s²) at ``time_s`` (eq. 6–7 on ``log(R_r Rᵀ)``, then eq. 4).
+
+    Args:
+        target: The swing.
+        time_s: Now (s).
+        rotation: The frame's rotation ``R`` in the world.
+        angular_velocity: ``ω`` (world, rad/s).
+        stiffness: ``k_p`` of the setpoint after the hand-over (1/s²).
+        damping: ``k_v`` (1/s).
+    """
+    error = pin.log3(target.orientation_target_in_world @ rotation.T)
+    remaining = target.duration_s - (time_s - target.start_s)
+    if remaining > TARGET_HANDOVER_S:
+        return target_acceleration(-error, angular_velocity, np.zeros(3), np.zeros(3), remaining)
+    return stiffness * error - damping * angular_velocity
+
+
 def compute_swing_objective(
     target: SwingTarget,
     time_s: float,
@@ -135,14 +170,12 @@ def compute_swing_objective(
         position: Frame origin (m, world).
         rotation: Frame rotation ``R`` in the world.
         v: Generalized velocity.
-        stiffness: ``k_p`` of the orientation and of the hand-over setpoints (1/s²).
+        stiffness: ``k_p`` of the hand-over setpoints (1/s²).
         damping: ``k_v`` (1/s).
         weight: α of every row.
         name: Objective name.
     """
     twist = jacobian @ v
     linear = swing_acceleration(target, time_s, position, twist[:3], stiffness, damping)
-    angular = (
-        stiffness * pin.log3(target.orientation_target_in_world @ rotation.T) - damping * twist[3:]
-    )
+    angular = swing_angular_acceleration(target, time_s, rotation, twist[3:], stiffness, damping)
     return Objective(name, jacobian, np.concatenate([linear, angular]) - drift, np.full(6, weight))

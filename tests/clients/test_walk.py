@@ -1,5 +1,5 @@
 """Walking (issue 19, de Lasa §6 with capture-point footholds) through a real server: in the
-reference simulator, and the pushes and the other robots in MuJoCo too.
+reference simulator, and the pushes, the speed change and the other robots in MuJoCo too.
 
 Judged on the physics of the simulated states: how far and how fast the base moves, that it
 stays upright and its stance feet do not slide, that it really stands on one foot when pushed.
@@ -71,13 +71,18 @@ def test_survives_side_and_front_pushes_in_single_support(server, backend):
     assert speed_between(record, 7.5, 9.0) > 0.4  # and it walks on
 
 
-def test_speed_changed_mid_walk_by_set_params(server):
+@pytest.mark.parametrize("backend", ["reference", "mujoco"])
+def test_speed_changed_mid_walk_by_set_params(server, backend):
     scenario = load_scenario(
         "walk",
+        backend=backend,
         duration_s=10.0,
-        # Knees bent more than in `walk`, as in `walk_fast`.
+        # Knees bent more than in `walk`, as in `walk_fast`; and at 0.8 m/s its shorter double
+        # support too (the style changes with the speed, in the same `set_params`).
         params={"behavior": "walk", "walk_speed": 0.4, "walk_knee_bend": 0.3},
-        param_changes=[ParamChange(time_s=5.0, params={"walk_speed": 0.8})],
+        param_changes=[
+            ParamChange(time_s=5.0, params={"walk_speed": 0.8, "walk_double_support_s": 0.03})
+        ],
     )
     record = run_scenario(scenario, server.endpoint)
     assert_walked_upright(record)

@@ -16,6 +16,7 @@ from controller_server.features.swing_foot import (
     SwingTarget,
     compute_swing_objective,
     swing_acceleration,
+    swing_angular_acceleration,
 )
 from controller_server.models import load_robot_model
 
@@ -72,9 +73,8 @@ def test_solved_alone_the_rows_give_the_swing_accelerations(model_name):
     linear_next, angular_next = rates(pin.integrate(model, q, v * STEP), v + acceleration * STEP)
     position, rotation = pose(q)
     desired_linear = swing_acceleration(target, time_s, position, linear_now, stiffness, damping)
-    desired_angular = (
-        stiffness * pin.log3(target.orientation_target_in_world @ rotation.T)
-        - damping * angular_now
+    desired_angular = swing_angular_acceleration(
+        target, time_s, rotation, angular_now, stiffness, damping
     )
     np.testing.assert_allclose((linear_next - linear_now) / STEP, desired_linear, atol=1e-2)
     np.testing.assert_allclose((angular_next - angular_now) / STEP, desired_angular, atol=1e-2)
@@ -97,3 +97,19 @@ def test_followed_exactly_the_foot_clears_the_step_height_and_lands_on_the_footh
     np.testing.assert_allclose(position[:2], foothold[:2], atol=0.005)
     assert position[2] == pytest.approx(0.0, abs=0.01)
     assert velocity[2] < 0.0  # still moving down: it touches rather than hovers
+
+
+def test_followed_exactly_a_tilted_foot_lands_flat():
+    # A foot that leaves the ground on its toe (pitched 0.15 rad, turning) lands flat.
+    flat = pin.rpy.rpyToMatrix(0.0, 0.0, 0.3)
+    target = SwingTarget(0, np.zeros(3), flat, 0.06, start_s=1.0, duration_s=0.3)
+    rotation = pin.rpy.rpyToMatrix(0.02, 0.15, 0.25)
+    angular_velocity, dt = np.array([0.0, 2.0, 0.0]), 1e-4
+    for tick in range(int(0.3 / dt)):
+        acceleration = swing_angular_acceleration(
+            target, 1.0 + tick * dt, rotation, angular_velocity, 100.0, 20.0
+        )
+        angular_velocity = angular_velocity + acceleration * dt
+        rotation = pin.exp3(angular_velocity * dt) @ rotation
+    assert np.linalg.norm(pin.log3(flat @ rotation.T)) < np.radians(0.3)
+    assert np.linalg.norm(angular_velocity) < 0.5  # from 2 rad/s; the hand-over's setpoint ends it
