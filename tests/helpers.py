@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import av
 import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
@@ -109,3 +110,33 @@ def run_poise(
         timeout=timeout_s,
         stdin=subprocess.DEVNULL,
     )
+
+
+CAPTION_ROWS = 30
+"""A video's caption band at the top (its time changes every frame: not motion)."""
+
+
+def video_frames(path: Path) -> list[np.ndarray]:
+    """Every frame of the MP4, RGB, the caption band cut off."""
+    with av.open(str(path)) as container:
+        return [
+            frame.to_ndarray(format="rgb24")[CAPTION_ROWS:]
+            for frame in container.decode(container.streams.video[0])
+        ]
+
+
+def red_pixels(image: np.ndarray) -> int:
+    """Pixels of the push arrow's red (nothing else in the scene is red)."""
+    r, g, b = (image[..., channel].astype(int) for channel in range(3))
+    return int(np.count_nonzero((r > 150) & (r > 2 * g) & (r > 2 * b)))
+
+
+def yellow_pixels(image: np.ndarray) -> int:
+    """Pixels of the support polygon's yellow."""
+    r, g, b = (image[..., channel].astype(int) for channel in range(3))
+    return int(np.count_nonzero((r > 150) & (g > 120) & (b < 0.5 * g)))
+
+
+def moved(first: np.ndarray, later: np.ndarray) -> int:
+    """Pixels that changed by more than the encoder's noise."""
+    return int(np.count_nonzero(np.abs(first.astype(int) - later.astype(int)).max(axis=2) > 40))

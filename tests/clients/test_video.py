@@ -10,18 +10,15 @@ and the push arrow's red present exactly while the push acts.
 import subprocess
 from pathlib import Path
 
-import av
 import numpy as np
 import pytest
 
 from clients.visual.video import VIDEO_FPS
-from tests.helpers import run_poise
+from tests.helpers import moved, red_pixels, run_poise, video_frames, yellow_pixels
 
 pytestmark = pytest.mark.e2e
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
-CAPTION_ROWS = 30
-"""The caption band at the top (its time changes every frame: not motion)."""
 PUSH_START_S, PUSH_DURATION_S, DURATION_S = 0.4, 0.2, 1.0
 SCENARIO = f"""
 name = "video_push"
@@ -41,39 +38,13 @@ def poise(arguments: list[str], cwd: Path) -> subprocess.CompletedProcess:
     return run_poise(arguments, cwd, timeout_s=300)
 
 
-def frames(path: Path) -> list[np.ndarray]:
-    """Every frame of the MP4, RGB, the caption band cut off."""
-    with av.open(str(path)) as container:
-        return [
-            frame.to_ndarray(format="rgb24")[CAPTION_ROWS:]
-            for frame in container.decode(container.streams.video[0])
-        ]
-
-
-def red_pixels(image: np.ndarray) -> int:
-    """Pixels of the push arrow's red (nothing else in the scene is red)."""
-    r, g, b = (image[..., channel].astype(int) for channel in range(3))
-    return int(np.count_nonzero((r > 150) & (r > 2 * g) & (r > 2 * b)))
-
-
-def yellow_pixels(image: np.ndarray) -> int:
-    """Pixels of the support polygon's yellow."""
-    r, g, b = (image[..., channel].astype(int) for channel in range(3))
-    return int(np.count_nonzero((r > 150) & (g > 120) & (b < 0.5 * g)))
-
-
-def moved(first: np.ndarray, later: np.ndarray) -> int:
-    """Pixels that changed by more than the encoder's noise."""
-    return int(np.count_nonzero(np.abs(first.astype(int) - later.astype(int)).max(axis=2) > 40))
-
-
 def test_sim_video_shows_the_robot_moving_and_the_push_while_it_acts(tmp_path):
     scenario = tmp_path / "video_push.toml"
     scenario.write_text(SCENARIO)
     result = poise(["sim", str(scenario), "--video", "--output", "out"], tmp_path)
     assert result.returncode == 0, result.stderr
 
-    video = frames(tmp_path / "out" / "video_push.mp4")
+    video = video_frames(tmp_path / "out" / "video_push.mp4")
     assert abs(len(video) - DURATION_S * VIDEO_FPS) <= 1
     times = np.arange(len(video)) / VIDEO_FPS
     pushed = (times >= PUSH_START_S) & (times < PUSH_START_S + PUSH_DURATION_S)
@@ -92,7 +63,7 @@ def test_log_video_draws_the_recorded_run(tmp_path):
     assert result.returncode == 0, result.stderr
     assert str(output) in result.stdout
 
-    video = frames(output)
+    video = video_frames(output)
     assert abs(len(video) - 0.2 * VIDEO_FPS) <= 1  # the log holds 0.2 s of states
     assert moved(video[0], video[-1]) > 100  # its chest push sways the robot
     assert min(yellow_pixels(frame) for frame in video) > 20  # the support polygon
