@@ -18,7 +18,7 @@ Its desired accelerations come from target objectives (eq. 6–7):
   axes), ``−e → 0`` with ``ω`` as its rate (exact to first order in ``e``; a
   foot is off by a few degrees). A setpoint ``ω̇_d = k_p e − k_v ω`` (eq. 4) at
   ``k_p`` = 100 landed a foot that left the ground on its toe (MuJoCo) still
-  3–4° toe-down, heel 14–16 mm up: the next stance began on the toe;
+  3–4° toe-down, heel 14–16 mm up: the next stance began on the toe.
 
 Each target objective hands over to a setpoint on its end point for the last
 :data:`TARGET_HANDOVER_S` (re-planned every tick, eq. 7 amplifies what is
