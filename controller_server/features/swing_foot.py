@@ -144,7 +144,7 @@ def swing_angular_acceleration(
     remaining = target.duration_s - (time_s - target.start_s)
     if remaining > TARGET_HANDOVER_S:
         return target_acceleration(-error, angular_velocity, np.zeros(3), np.zeros(3), remaining)
-    return stiffness * error - damping * angular_velocity
+    return setpoint_acceleration(np.zeros(3), -error, angular_velocity, stiffness, damping)
 
 
 def compute_swing_objective(
