@@ -330,6 +330,8 @@ class RobotDescription:
         contacts_source: Where the contacts come from: ``given``, ``sole sites``
             or ``collision geometry``.
         warnings: What a user should know (unactuated joints, converted actuators …).
+        disabled_collision_pairs: Pairs of body names whose collisions a simulator
+            must not simulate (an SRDF's ``disable_collisions``), each pair sorted.
     """
 
     name: str
@@ -345,6 +347,7 @@ class RobotDescription:
     keyframe: str | None
     contacts_source: str
     warnings: tuple[str, ...] = field(default=())
+    disabled_collision_pairs: tuple[tuple[str, str], ...] = field(default=())
 
     @property
     def joint_names(self) -> list[str]:
