@@ -35,7 +35,7 @@ from clients.sim.backend import PhysicsBackend, Push
 from clients.sim.errors import ScenarioError
 from clients.sim.imu import SimulatedImu
 from clients.sim.model_file import describe_model, hello_model
-from clients.sim.scenario import Scenario
+from clients.sim.scenario import Scenario, controller_params, initial_joint_positions
 from clients.state import RobotState
 from clients.track import RunObserver, Track
 from protocol.messages import Command, ContactSpec, Diagnostics, Welcome
@@ -104,13 +104,17 @@ def physics_backend(
 
 
 def standing_state(
-    welcome: Welcome, joint_overrides: dict[str, list[float]], model: pin.Model | None = None
+    welcome: Welcome,
+    joint_overrides: dict[str, list[float]],
+    model: pin.Model | None = None,
+    model_label: str | None = None,
 ) -> RobotState:
     """The server's standing pose (with joint overrides), at rest.
 
     With overrides and the robot's ``model`` (wire joint order), the base is
     raised or lowered so the lowest contact point of ``welcome.contacts``
-    touches z = 0 again, as in the standing pose.
+    touches z = 0 again, as in the standing pose. ``model_label`` names the
+    robot in errors (the user's file; default: the server's name for it).
 
     Raises:
         ScenarioError: An override names a joint the robot lacks (the message
@@ -124,8 +128,8 @@ def standing_state(
             close = difflib.get_close_matches(name, slices, n=1)
             hint = f"did you mean {close[0]!r}? " if close else ""
             raise ScenarioError(
-                f"initial_joint_position: {welcome.model_name} has no joint {name!r}; "
-                f"{hint}joints: {', '.join(slices)}"
+                f"initial_joint_position: {model_label or welcome.model_name} has no joint "
+                f"{name!r}; {hint}joints: {', '.join(slices)}"
             )
         joint = next(j for j in joints if j.name == name)
         if len(value) != joint.nq:
@@ -302,14 +306,20 @@ def run_scenario(
             keyframe=scenario.keyframe,
             controller=scenario.controller,
             # Only the weighted controllers have a measured mode; distributed is their default.
-            params={**scenario.params, **({"ground_force_mode": "measured"} if measured else {})},
+            params={
+                **controller_params(scenario),
+                **({"ground_force_mode": "measured"} if measured else {}),
+            },
             client_name=f"poise sim {scenario.name}",
             diagnostics_period_ticks=scenario.diagnostics_period_ticks,
             **imu_mount,
         )
         backend.reset(
             standing_state(
-                welcome, scenario.initial_joint_position, describe_model(scenario.model).model
+                welcome,
+                initial_joint_positions(scenario),
+                describe_model(scenario.model).model,
+                scenario.model,
             )
         )
         if imu is not None:

@@ -6,6 +6,13 @@ the initial pose, the pushes and timed parameter changes (a motion clip
 starting, a weight shift, a foot leaving the supports, point targets
 dragged). Built-in scenarios (thesis ch. 7) live in
 ``clients/sim/scenarios/`` and load by name.
+
+A built-in scenario runs on any biped (``--model``), so it says what it
+needs in the robot's terms (:mod:`clients.sim.robot_terms`): a crouch as a
+knee bend (``initial_knee_bend_rad``), pushes on ``trunk`` or ``root`` (or
+``chest``, ``torso``, ``abdomen``, ``pelvis`` on a robot without a body of
+that name), a twist as a yaw rate (``twist_yaw_rate_rad_per_s``), turned
+into each robot's joints, bodies and angular momentum when it loads.
 """
 
 from __future__ import annotations
@@ -22,6 +29,12 @@ from clients.sim.backend import Push
 from clients.sim.errors import ScenarioError, ScenarioNotFound
 from clients.sim.imu import ImuSpec
 from clients.sim.model_file import DescriptionError, body_names, describe_model
+from clients.sim.robot_terms import (
+    RobotTermsError,
+    crouched_joint_positions,
+    resolve_body,
+    vertical_inertia,
+)
 from protocol.messages import ContactSpec
 
 __all__ = [
@@ -30,7 +43,10 @@ __all__ = [
     "PushSpec",
     "Scenario",
     "builtin_scenario_names",
+    "controller_params",
     "explain",
+    "initial_configuration",
+    "initial_joint_positions",
     "load_scenario",
 ]
 
@@ -42,7 +58,11 @@ class PushSpec(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    body: str = Field(description="MJCF body the force acts on, e.g. `chest`.")
+    body: str = Field(
+        description="Body the force acts on, e.g. `chest`; `trunk` is the robot's heaviest "
+        "segment outside the legs and `root` its root body (as are `chest`, `torso`, "
+        "`abdomen` and `pelvis` on a robot without a body of that name)."
+    )
     force_in_world_N: tuple[float, float, float] = Field(description="Force (N), world axes.")
     point_in_body_m: tuple[float, float, float] = Field(
         default=(0.0, 0.0, 0.0), description="Application point in the body frame (m)."
@@ -137,8 +157,27 @@ class Scenario(BaseModel):
         description='The simulated IMU of `base_state = "imu"`: mounting and errors '
         "(BMI088 defaults); it samples once per control tick.",
     )
+    initial_knee_bend_rad: float | None = Field(
+        default=None,
+        ge=0.0,
+        le=2.0,
+        description="At t = 0 each knee bent to at least this angle between thigh and shank "
+        "(rad), its hip and ankle pitch turned half as much the other way (feet flat, trunk "
+        "upright): the legs are found from the robot (the joints from the root to each "
+        "contact), so it carries to any biped; `initial_joint_position` overrides it joint "
+        "by joint. Default: the standing pose's legs.",
+    )
     initial_joint_position: dict[str, list[float]] = Field(
         default_factory=dict, description="Joint name → position (rad; ball: xyzw) at t = 0."
+    )
+    twist_yaw_rate_rad_per_s: float | None = Field(
+        default=None,
+        ge=-50.0,
+        le=50.0,
+        description="A jump's twist as the yaw rate the thrust gives the whole robot (rad/s): "
+        "sent as the `jump_twist_angular_momentum` parameter, this × the robot's vertical "
+        "inertia (composite rigid body, about its CM) at its starting pose (kg·m²/s), so a "
+        "lighter robot gets less. Default: the parameters' own.",
     )
     pushes: list[PushSpec] = Field(default_factory=list)
     param_changes: list[ParamChange] = Field(
@@ -172,6 +211,16 @@ class Scenario(BaseModel):
             raise ValueError(
                 'base_state = "imu" needs command_delay_ticks = 0: a delayed command is '
                 "computed for a predicted state, which needs the base the server estimates"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _one_twist(self) -> Scenario:
+        if self.twist_yaw_rate_rad_per_s is not None and "jump_twist_angular_momentum" in (
+            self.params
+        ):
+            raise ValueError(
+                "give twist_yaw_rate_rad_per_s or params.jump_twist_angular_momentum, not both"
             )
         return self
 
@@ -227,7 +276,8 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> Scenario:
         key = {"model": "model", "contacts": "contacts", "keyframe": "keyframe"}[exc.field]
         raise ScenarioError(f"scenario {str(name_or_path)!r}: {key}: {exc}") from None
     bodies = body_names(scenario.model)
-    _check_push_bodies(str(name_or_path), scenario, bodies)
+    scenario = _resolve_push_bodies(str(name_or_path), scenario, bodies)
+    _check_initial_pose(str(name_or_path), scenario)
     if scenario.imu.body and bodies and scenario.imu.body not in bodies:
         close = difflib.get_close_matches(scenario.imu.body, bodies, n=1)
         hint = f"did you mean {close[0]!r}? " if close else ""
@@ -238,16 +288,95 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> Scenario:
     return scenario
 
 
-def _check_push_bodies(name: str, scenario: Scenario, bodies: list[str]) -> None:
-    """Refuse a push on a body the model lacks now, not when the push starts."""
+def _resolve_push_bodies(name: str, scenario: Scenario, bodies: list[str]) -> Scenario:
+    """Pushes on the robot's own bodies (``trunk``, ``root`` …); refused now if it lacks one."""
+    description = describe_model(
+        scenario.model, contacts=scenario.contacts, keyframe=scenario.keyframe
+    )
+    pushes = []
     for index, push in enumerate(scenario.pushes):
-        if bodies and push.body not in bodies:
+        body = resolve_body(description, push.body) if bodies else push.body
+        if body is None:
             close = difflib.get_close_matches(push.body, bodies, n=1)
             hint = f"did you mean {close[0]!r}? " if close else ""
             raise ScenarioError(
                 f"scenario {name!r}: pushes[{index}].body: {scenario.model} has no body "
-                f"{push.body!r}; {hint}bodies: {', '.join(bodies)}"
+                f"{push.body!r}; {hint}bodies: {', '.join(bodies)} (or `trunk`, `root`)"
             )
+        pushes.append(push if body == push.body else push.model_copy(update={"body": body}))
+    return scenario.model_copy(update={"pushes": pushes}) if scenario.pushes else scenario
+
+
+def _check_initial_pose(name: str, scenario: Scenario) -> None:
+    """Refuse now a joint the robot lacks, or a crouch whose legs cannot be found."""
+    joints = describe_model(
+        scenario.model, contacts=scenario.contacts, keyframe=scenario.keyframe
+    ).joint_names
+    for joint in scenario.initial_joint_position:
+        if joint not in joints:
+            close = difflib.get_close_matches(joint, joints, n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise ScenarioError(
+                f"scenario {name!r}: initial_joint_position: {scenario.model} has no joint "
+                f"{joint!r}; {hint}joints: {', '.join(joints)}"
+            )
+    try:
+        initial_joint_positions(scenario)
+    except RobotTermsError as exc:
+        raise ScenarioError(
+            f"scenario {name!r}: initial_knee_bend_rad on {scenario.model}: {exc}"
+        ) from None
+
+
+def initial_joint_positions(scenario: Scenario) -> dict[str, list[float]]:
+    """The joints set at t = 0, by name.
+
+    The crouch (``initial_knee_bend_rad``), then ``initial_joint_position``.
+
+    Raises:
+        RobotTermsError: A crouch on a robot whose legs cannot be found.
+    """
+    positions: dict[str, list[float]] = {}
+    if scenario.initial_knee_bend_rad is not None:
+        description = describe_model(
+            scenario.model, contacts=scenario.contacts, keyframe=scenario.keyframe
+        )
+        positions.update(crouched_joint_positions(description, scenario.initial_knee_bend_rad))
+    positions.update(scenario.initial_joint_position)
+    return positions
+
+
+def initial_configuration(scenario: Scenario) -> Any:
+    """Pinocchio ``q`` at t = 0: the standing pose with :func:`initial_joint_positions`.
+
+    The base is where the standing pose has it (heights are to be measured from the soles).
+    """
+    description = describe_model(
+        scenario.model, contacts=scenario.contacts, keyframe=scenario.keyframe
+    )
+    q = description.standing_configuration.copy()
+    model = description.model
+    for joint, value in initial_joint_positions(scenario).items():
+        index = model.joints[model.getJointId(joint)].idx_q
+        q[index : index + len(value)] = value
+    return q
+
+
+def controller_params(scenario: Scenario) -> dict[str, Any]:
+    """The controller parameters sent at ``hello``.
+
+    ``params``, with the twist's yaw rate (``twist_yaw_rate_rad_per_s``) made this robot's
+    ``jump_twist_angular_momentum``: × its vertical inertia at :func:`initial_configuration`.
+    """
+    params = dict(scenario.params)
+    if scenario.twist_yaw_rate_rad_per_s is not None:
+        description = describe_model(
+            scenario.model, contacts=scenario.contacts, keyframe=scenario.keyframe
+        )
+        params["jump_twist_angular_momentum"] = scenario.twist_yaw_rate_rad_per_s * (
+            vertical_inertia(description, initial_configuration(scenario))
+        )
+    return params
 
 
 def explain(error: ValidationError, root: type[BaseModel] | None = None) -> str:

@@ -7,6 +7,11 @@ survives. The pairs are independent, so their trials run on a
 on a Dask cluster); each pair's trials run one after the other, each force
 chosen from the pair's own results, so every pair tries the same forces and
 reaches the same answer whatever the pool.
+
+Beside each answer the sweep gives the robot's own no-step bound
+(:func:`~clients.sim.robot_terms.no_step_bound`): the largest impulse
+(N·s) it could take on both feet without stepping, from its standing pose
+and soles, and the impulse survived (force × duration) as a share of it.
 """
 
 from __future__ import annotations
@@ -22,8 +27,11 @@ from typing import Any
 from clients.client import CurveKeys, ServerTimeout
 from clients.pool import BATCH_DEADLINE_S, RunPool, Task
 from clients.progress import ProgressBar
+from clients.sim.errors import ScenarioError
+from clients.sim.model_file import describe_model
+from clients.sim.robot_terms import NoStepBound, RobotTermsError, no_step_bound, resolve_body
 from clients.sim.runner import run_scenario
-from clients.sim.scenario import PushSpec, Scenario, load_scenario
+from clients.sim.scenario import PushSpec, Scenario, initial_configuration, load_scenario
 from protocol.errors import ErrorCode
 
 __all__ = [
@@ -35,7 +43,9 @@ __all__ = [
     "Bisection",
     "Sweep",
     "push_survived",
+    "sweep_bounds",
     "sweep_controllers",
+    "sweep_entries",
     "sweep_push",
     "trial_scenario",
 ]
@@ -60,6 +70,25 @@ SWEEP_CONTROLLERS: dict[str, tuple[str, dict[str, Any]]] = {
 
 Only what depends on the simulation, not on the machine's speed: see
 :data:`TRIAL_QP_TIME_BUDGET_S` and :data:`~clients.pool.BATCH_DEADLINE_S`."""
+
+
+def sweep_entries(controller: str | None) -> dict[str, tuple[str, dict[str, Any]]]:
+    """What a sweep compares: :data:`SWEEP_CONTROLLERS` (``None``), or one controller's own.
+
+    ``momentum`` is the full controller (``+ linear and angular momentum``, not its
+    ablations), ``prioritized`` de Lasa's; any other controller is swept as it is.
+    """
+    if controller is None:
+        return dict(SWEEP_CONTROLLERS)
+    full = {
+        "momentum": "+ linear and angular momentum",
+        "prioritized": "prioritized (de Lasa 2010)",
+    }
+    if controller in full:
+        return {full[controller]: SWEEP_CONTROLLERS[full[controller]]}
+    return {controller: (controller, {})}
+
+
 SWEEP_DIRECTIONS: dict[str, tuple[float, float, float]] = {
     "from behind": (1.0, 0.0, 0.0),
     "from the front": (-1.0, 0.0, 0.0),
@@ -213,12 +242,14 @@ class Sweep:
             ``directions``).
         directions: Direction name → push direction in world (x, y, z).
         bisections: Controller label → direction name → its bisection.
+        bounds: Direction name → the robot's no-step bound along it (empty: not computed).
     """
 
     scenario: str
     push: PushSpec
     directions: dict[str, tuple[float, float, float]]
     bisections: dict[str, dict[str, Bisection]]
+    bounds: dict[str, NoStepBound] = field(default_factory=dict)
 
     def largest_survived_N(self) -> dict[str, dict[str, float]]:
         """Controller label → direction name → largest force survived (N)."""
@@ -227,10 +258,40 @@ class Sweep:
             for label, row in self.bisections.items()
         }
 
+    def impulse_survived_N_s(self) -> dict[str, dict[str, float]]:
+        """Controller label → direction name → largest impulse survived (N·s, force × duration)."""
+        return {
+            label: {name: force * self.push.duration_s for name, force in row.items()}
+            for label, row in self.largest_survived_N().items()
+        }
+
+    def fraction_of_bound(self) -> dict[str, dict[str, float]]:
+        """Controller label → direction name → impulse survived / no-step bound."""
+        return {
+            label: {
+                name: impulse / self.bounds[name].impulse_N_s
+                for name, impulse in row.items()
+                if name in self.bounds and self.bounds[name].impulse_N_s > 0.0
+            }
+            for label, row in self.impulse_survived_N_s().items()
+        }
+
     def table(self) -> list[str]:
-        """The printed table: a header, then a row per controller done so far, in order."""
-        header = "".join(f"{name:>16}" for name in self.directions)
-        lines = [f"{'largest push survived (N)':<32}{header}{'weakest':>10}{'× tracking':>12}"]
+        """The printed table: a header, then a row per controller done so far, in order.
+
+        Each cell is the largest force survived (N) and, with :attr:`bounds`, the impulse
+        it gives (force × duration) as a share of the no-step bound; the second header line
+        gives the bound (N·s) per direction.
+        """
+        width = 22 if self.bounds else 16
+        header = "".join(f"{name:>{width}}" for name in self.directions)
+        title = "largest push survived (N, % bound)" if self.bounds else "largest push survived (N)"
+        lines = [f"{title:<36}{header}{'weakest':>10}{'× first':>10}"]
+        if self.bounds:
+            cells = "".join(
+                f"{f'{self.bounds[name].impulse_N_s:.1f} N·s':>{width}}" for name in self.directions
+            )
+            lines.append(f"{'no-step bound (m ω d)':<36}{cells}")
         baseline = None
         for label, row in self.bisections.items():
             if not all(b.done for b in row.values()):
@@ -239,8 +300,15 @@ class Sweep:
             weakest = min(forces)
             baseline = weakest if baseline is None else baseline
             ratio = f"{weakest / baseline:.2f}×" if baseline > 0 else "-"
-            cells = "".join(f"{force:>16.1f}" for force in forces)
-            lines.append(f"{label:<32}{cells}{weakest:>10.1f}{ratio:>12}")
+            cells = ""
+            for name, force in zip(row, forces, strict=True):
+                bound = self.bounds.get(name)
+                if bound is None or bound.impulse_N_s <= 0.0:
+                    cells += f"{force:>{width}.1f}"
+                else:
+                    share = force * self.push.duration_s / bound.impulse_N_s
+                    cells += f"{f'{force:.1f} {share:4.0%}':>{width}}"
+            lines.append(f"{label:<36}{cells}{weakest:>10.1f}{ratio:>10}")
         return lines
 
     def to_json(self) -> dict[str, Any]:
@@ -250,6 +318,18 @@ class Sweep:
             "push": self.push.model_dump(mode="json", exclude={"force_in_world_N"}),
             "directions": {name: list(xyz) for name, xyz in self.directions.items()},
             "largest_survived_N": self.largest_survived_N(),
+            "impulse_survived_N_s": self.impulse_survived_N_s(),
+            "no_step_bound": {
+                name: {
+                    "impulse_N_s": bound.impulse_N_s,
+                    "mass_kg": bound.mass_kg,
+                    "com_height_m": bound.com_height_m,
+                    "omega_per_s": bound.omega_per_s,
+                    "distance_m": bound.distance_m,
+                }
+                for name, bound in self.bounds.items()
+            },
+            "fraction_of_bound": self.fraction_of_bound(),
             "trials": {
                 label: {
                     name: [{"force_N": f, "survived": s} for f, s in b.trials]
@@ -269,8 +349,10 @@ class _SweepTasks:
         self.settle_s = settle_s
         self.bar = bar
         self.waiting = [(label, name) for label in sweep.bisections for name in sweep.directions]
-        self.printed = 1  # the header
-        self.bar.print(sweep.table()[0])
+        header = sweep.table()  # no row is done yet
+        for line in header:
+            self.bar.print(line)
+        self.printed = len(header)
 
     def next_task(self) -> Task | None:
         if not self.waiting:
@@ -345,16 +427,25 @@ def sweep_controllers(
     ``output_dir``, writes ``sweep_<scenario>.json`` (every trial) and
     ``sweep_<scenario>.png`` (survived/fell over direction × force, a polar
     plot per controller, :func:`~clients.sim.sweep_plot.plot_sweep`).
+
+    The push's body is the robot's (``chest`` on a robot without one: its trunk,
+    :func:`~clients.sim.robot_terms.resolve_body`), checked before the first trial.
+
+    Raises:
+        ScenarioError: The scenario cannot run, or the robot has no such push body.
     """
     bases = sweep_bases(scenario_name, overrides, controllers)
+    first = bases[next(iter(bases))]
+    push = push.model_copy(update={"body": _push_body(first, push.body)})
     sweep = Sweep(
-        scenario=bases[next(iter(bases))].name,
+        scenario=first.name,
         push=push,
         directions=dict(directions),
         bisections={
             label: {name: Bisection(max_force_N, tolerance_N) for name in directions}
             for label in controllers
         },
+        bounds=sweep_bounds(first, directions),
     )
     with ProgressBar(f"sweep {sweep.scenario}", enabled=progress) as bar:
         pool.run(_SweepTasks(sweep, bases, settle_s, bar))
@@ -366,3 +457,38 @@ def sweep_controllers(
         plot_sweep(sweep, stem.with_suffix(".png"))
         print(f"sweep: {stem.with_suffix('.json')}; picture: {stem.with_suffix('.png')}")
     return sweep
+
+
+def _push_body(scenario: Scenario, body: str) -> str:
+    """The robot's body a sweep's push acts on; refused in one line if it has none such."""
+    description = describe_model(
+        scenario.model, contacts=scenario.contacts, keyframe=scenario.keyframe
+    )
+    resolved = resolve_body(description, body)
+    if resolved is None:
+        bodies = [b.name for b in description.bodies]
+        raise ScenarioError(
+            f"--push-body: {scenario.model} has no body {body!r}; give one of "
+            f"{', '.join(bodies)} (or `trunk`, `root`)"
+        )
+    return resolved
+
+
+def sweep_bounds(
+    scenario: Scenario, directions: Mapping[str, tuple[float, float, float]]
+) -> dict[str, NoStepBound]:
+    """The robot's no-step bound per direction, at the scenario's starting pose.
+
+    A direction without a bound (straight up or down, or a CM outside the soles) has none.
+    """
+    description = describe_model(
+        scenario.model, contacts=scenario.contacts, keyframe=scenario.keyframe
+    )
+    q = initial_configuration(scenario)
+    bounds = {}
+    for name, direction in directions.items():
+        try:
+            bounds[name] = no_step_bound(description, direction, q)
+        except RobotTermsError:
+            continue
+    return bounds

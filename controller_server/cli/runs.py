@@ -32,12 +32,12 @@ def _sim(args: argparse.Namespace) -> int:
     from clients.sim.app import run_scenarios
     from clients.sim.output import OutputDirectory
     from clients.sim.scenario import PushSpec
-    from clients.sim.sweep import SWEEP_CONTROLLERS, SWEEP_DIRECTIONS, sweep_controllers
+    from clients.sim.sweep import SWEEP_DIRECTIONS, sweep_controllers, sweep_entries
 
     overrides = {}
     if args.backend:
         overrides["backend"] = args.backend
-    if args.controller:
+    if args.controller and not args.sweep_push:  # a sweep picks its entries by controller
         overrides["controller"] = args.controller
     if args.base_state:
         overrides["base_state"] = args.base_state
@@ -45,6 +45,8 @@ def _sim(args: argparse.Namespace) -> int:
         overrides["model"] = args.model
     if args.keyframe:
         overrides["keyframe"] = args.keyframe
+    if args.duration is not None:
+        overrides["duration_s"] = args.duration
     if args.contacts:
         overrides["contacts"] = [{"name": frame, "frame": frame} for frame in args.contacts]
     check_endpoint_option("--connect", args.connect)
@@ -77,13 +79,20 @@ def _sim(args: argparse.Namespace) -> int:
     if args.push_direction:
         directions = {f"({x:g}, {y:g}, {z:g})": (x, y, z) for x, y, z in args.push_direction}
     output_dir = Path(args.output)
-    pairs = len(SWEEP_CONTROLLERS) * len(directions)  # no more workers than bisections
+    controllers = sweep_entries(args.controller)
+    pairs = len(controllers) * len(directions)  # no more workers than bisections
     with (
         OutputDirectory(output_dir),
         RunPool(min(workers, pairs), args.dask, args.connect, curve) as pool,
     ):
         sweep_controllers(
-            args.scenarios[0], push, directions, pool, overrides, output_dir=output_dir
+            args.scenarios[0],
+            push,
+            directions,
+            pool,
+            overrides,
+            output_dir=output_dir,
+            controllers=controllers,
         )
     return 0
 
@@ -138,7 +147,8 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
     sim.add_argument(
         "--controller",
         choices=CONTROLLER_NAMES,
-        help="controller for every scenario (default: each scenario's own)",
+        help="controller for every scenario (default: each scenario's own); with --sweep-push, "
+        "sweep only this controller (momentum: the full controller, not its ablations)",
     )
     sim.add_argument(
         "--base-state",
@@ -158,6 +168,13 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         metavar="NAME",
         help="MJCF keyframe of the standing pose for every scenario: initial pose, reference "
         "pose and CM height (default: each scenario's own)",
+    )
+    sim.add_argument(
+        "--duration",
+        type=float,
+        metavar="SECONDS",
+        help="simulated time of every scenario (default: each scenario's own; a sweep's "
+        "trials last at least 3 s past their push)",
     )
     sim.add_argument(
         "--contacts",
@@ -199,7 +216,9 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         "--sweep-push",
         action="store_true",
         help="find by bisection the largest push each thesis ablation and the prioritized "
-        "controller survive, per direction (first scenario); prints a table, writes "
+        "controller (or only --controller) survive, per direction (first scenario); prints a "
+        "table with the impulse survived as a share of the robot's no-step bound (m ω d: "
+        "mass, √(g/CM height), CM to the soles' edge along the push), writes "
         "DIR/sweep_<scenario>.json (every trial) and DIR/sweep_<scenario>.png (survived/fell "
         "over direction and force, a polar plot per controller)",
     )
@@ -207,7 +226,9 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         "--push-body",
         default="chest",
         metavar="BODY",
-        help="body pushed in the sweep (default: chest; see `poise list bodies MODEL`)",
+        help="body pushed in the sweep; `trunk` is the robot's heaviest segment outside the "
+        "legs, `root` its root body (default: chest, or the trunk on a robot without one; see "
+        "`poise list bodies MODEL`)",
     )
     sim.add_argument(
         "--push-direction",
