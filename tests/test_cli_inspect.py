@@ -29,7 +29,7 @@ def test_a_vendor_scene_shows_joints_limits_servos_contacts_and_pose(capsys):
     assert "scene: MJCF, 22 joint coordinates, 57.60 kg" == lines[0]
     assert lines[1].startswith("standing pose: keyframe 'home'; base at (0.000, 0.000, 0.994) m")
     assert "keyframes: home, stand" in lines
-    assert "contacts (collision geometry): name, frame, points in the frame (m)" in lines
+    assert "contacts (collision geometry): name, body, sole points, sole length × width (m)" in lines
     assert any(line.split()[:2] == ["left_foot", "left_foot"] for line in lines)
 
 
@@ -51,9 +51,9 @@ def test_the_starter_scenario_names_the_model_keyframe_and_a_push(capsys, tmp_pa
 
 def test_named_feet_and_a_builtin(capsys):
     lines = inspected(capsys, "revolute_humanoid")
-    assert "contacts (sole sites): name, frame, points in the frame (m)" in lines
+    assert "contacts (sole sites): name, body, sole points, sole length × width (m)" in lines
     lines = inspected(
         capsys, str(SCENE), "--contacts", "left_ankle_pitch_link", "right_ankle_pitch_link"
     )
-    assert "contacts (given): name, frame, points in the frame (m)" in lines
+    assert "contacts (given): name, body, sole points, sole length × width (m)" in lines
     assert any(line.split()[0] == "left_ankle_pitch_link" for line in lines)

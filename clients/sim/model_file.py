@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,9 @@ from controller_server.models.description import (
     RobotDescription,
     describe,
     gather_files,
+    resolve_file,
+    ros_package_path,
+    srdf_paths,
 )
 from protocol.messages import ContactSpec
 
@@ -85,28 +89,98 @@ def model_format(path: Path) -> str:
     return "urdf" if path.suffix.lower() == ".urdf" else "mjcf"
 
 
-def local_reader(path: Path) -> FileReader:
-    """Reads the files a model names, relative to its directory."""
-    return lambda relative: (path.parent / relative).read_bytes()
+def local_reader(path: Path, srdf: Path | None = None) -> FileReader:
+    """Reads the files a model names, from the client's disk.
+
+    Paths are relative to the model's directory; ``package://`` URIs are found
+    through ``ROS_PACKAGE_PATH``, then the model's ancestors, as ROS tools find
+    them; ``file://`` URIs are absolute paths (see
+    :func:`~controller_server.models.description.resolve_file`).
+
+    Args:
+        path: The model file.
+        srdf: An SRDF served in place of the first of the URDF's
+            :func:`~controller_server.models.description.srdf_paths`.
+
+    Raises:
+        DescriptionError: ``srdf`` given for a model without a ``<robot name>``.
+    """
+    directory = path.parent
+    search_path = ros_package_path()
+    packages: dict[str, Path | None] = {}
+    served: dict[str, Path] = {}
+    if srdf is not None:
+        names = srdf_paths(path.read_bytes())
+        if not names:
+            raise DescriptionError(
+                f"--srdf {srdf}: {path.name} has no <robot name>, which names a URDF's SRDF"
+            )
+        served[names[0]] = srdf
+
+    def read(name: str) -> bytes:
+        if name in served:
+            return served[name].read_bytes()
+        return resolve_file(
+            name, directory, search_path=search_path, packages=packages
+        ).read_bytes()
+
+    return read
 
 
 def describe_model(
-    model: str, *, contacts: list[ContactSpec] | None = None, keyframe: str | None = None
+    model: str,
+    *,
+    contacts: list[ContactSpec] | None = None,
+    keyframe: str | None = None,
+    srdf: str | Path | None = None,
 ) -> RobotDescription:
     """What Poise reads from a built-in or a model file (cached per file, contacts and keyframe).
+
+    Args:
+        model: A built-in name or a model file.
+        contacts: Contacts to use instead of the found ones.
+        keyframe: Keyframe of the standing pose (a URDF's: its SRDF's ``group_state``).
+        srdf: An SRDF file for a URDF, instead of the one beside it.
 
     Raises:
         FileNotFoundError: No such file or built-in.
         DescriptionError: The file cannot be used as written (one line saying what to do).
     """
     path = resolve_model_path(model).resolve()
+    srdf_path = None if srdf is None else _srdf_file(srdf, path)
     contacts_json = None if contacts is None else json.dumps([c.model_dump() for c in contacts])
-    return _describe(path, path.stat().st_mtime_ns, contacts_json, keyframe)
+    return _describe(
+        path,
+        path.stat().st_mtime_ns,
+        contacts_json,
+        keyframe,
+        srdf_path,
+        None if srdf_path is None else srdf_path.stat().st_mtime_ns,
+        # Packages are looked up on every read: a changed ROS_PACKAGE_PATH reads again.
+        os.environ.get("ROS_PACKAGE_PATH", ""),
+    )
+
+
+def _srdf_file(srdf: str | Path, model: Path) -> Path:
+    path = Path(srdf).expanduser()
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"SRDF file {str(srdf)!r} does not exist (relative paths start from {Path.cwd()})"
+        )
+    if model_format(model) != "urdf":
+        raise DescriptionError(f"--srdf {srdf}: an SRDF goes with a URDF, not {model.name}")
+    return path.resolve()
 
 
 @lru_cache(maxsize=16)
 def _describe(
-    path: Path, mtime_ns: int, contacts_json: str | None, keyframe: str | None
+    path: Path,
+    mtime_ns: int,
+    contacts_json: str | None,
+    keyframe: str | None,
+    srdf: Path | None,
+    srdf_mtime_ns: int | None,
+    package_path_variable: str,
 ) -> RobotDescription:
     contacts = (
         None
@@ -116,29 +190,36 @@ def _describe(
     return describe(
         path.read_bytes(),
         model_format(path),
-        read=local_reader(path),
+        read=local_reader(path, srdf),
         name=path.stem,
         contacts=contacts,
         keyframe=keyframe,
     )
 
 
-def hello_model(model: str) -> dict[str, Any]:
+def hello_model(model: str, *, srdf: str | Path | None = None) -> dict[str, Any]:
     """The ``hello`` fields naming ``model``: a built-in by name, a file by its text and files.
 
     A server reads files only from its own model directories, and may run on
     another machine; the simulator has the files, so it sends what it
-    simulates: the main file's text and every file it names (includes, meshes).
+    simulates: the main file's text and every file it names (includes,
+    meshes, a URDF's SRDF), by the names the file gives them.
+
+    Args:
+        model: A built-in name or a model file.
+        srdf: An SRDF file for a URDF, sent as the one beside it.
 
     Raises:
+        FileNotFoundError: ``srdf`` does not exist.
         DescriptionError: The model names a file that cannot be read.
     """
     path = Path(model)
     if not (path.suffix and path.is_file()):
         return {"model": model}
+    srdf_path = None if srdf is None else _srdf_file(srdf, path)
     text = path.read_bytes()
     fields: dict[str, Any] = {"model_text": text.decode(), "model_format": model_format(path)}
-    assets = gather_files(text, model_format(path), local_reader(path))
+    assets = gather_files(text, model_format(path), local_reader(path, srdf_path))
     if assets:
         fields["model_assets"] = assets
     return fields

@@ -90,14 +90,43 @@ def report_lines(description: RobotDescription) -> list[str]:
             f"{f'{limit:g}' if np.isfinite(limit) else 'none':<8}"
             f"{_ACTUATOR_NOTES.get(kind, kind)}"
         )
-    lines.append(f"contacts ({description.contacts_source}): name, frame, points in the frame (m)")
+    lines.append(
+        f"contacts ({description.contacts_source}): name, body, sole points, "
+        "sole length × width (m)"
+    )
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
     for contact in description.contacts:
+        frame_id = model.getFrameId(contact.frame)
+        frame = model.frames[frame_id]
+        body = contact.frame if frame.type == pin.BODY else model.frames[frame.parentFrame].name
+        length, width = _sole_size(data.oMf[frame_id], contact.points_in_frame)
         points = ", ".join(
             "(" + ", ".join(f"{c:.3f}" for c in point) + ")" for point in contact.points_in_frame
         )
-        lines.append(f"  {contact.name:<14} {contact.frame:<24} {points}")
+        lines += [
+            f"  {contact.name:<14} {body:<24} {len(contact.points_in_frame)} points  "
+            f"{length:.3f} × {width:.3f}",
+            f"    why: {contact.reason or description.contacts_source}",
+            f"    points in frame {contact.frame} (m): {points}",
+        ]
     lines += [f"warning: {warning}" for warning in description.warnings]
     return lines
+
+
+def _sole_size(frame_in_world: object, points_in_frame: object) -> tuple[float, float]:
+    """A sole's length along its frame's heading (x on the ground) and its width across (m)."""
+    import numpy as np
+
+    rotation = frame_in_world.rotation  # type: ignore[attr-defined]
+    points = np.asarray(points_in_frame, float) @ rotation.T
+    heading = rotation[:, 0] * (1.0, 1.0, 0.0)
+    if np.linalg.norm(heading) < 1e-6:  # the frame's x points up or down: its z
+        heading = rotation[:, 2] * (1.0, 1.0, 0.0)
+    heading /= np.linalg.norm(heading)
+    along = points @ heading
+    across = points @ np.array([-heading[1], heading[0], 0.0])
+    return float(np.ptp(along)), float(np.ptp(across))
 
 
 def _kind(joint: object) -> str:

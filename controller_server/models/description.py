@@ -37,11 +37,12 @@ From the model, a :class:`RobotDescription` finds:
 from __future__ import annotations
 
 import difflib
+import os
 import posixpath
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import PurePosixPath
+from pathlib import Path, PurePosixPath
 
 import mujoco
 import numpy as np
@@ -50,7 +51,9 @@ import pinocchio as pin
 from protocol.messages import ContactSpec
 
 __all__ = [
+    "FOOT_CANDIDATE_HEIGHT_FRACTION",
     "FOOT_HEIGHT_TOLERANCE_M",
+    "MAX_PACKAGE_SEARCH_DEPTH",
     "SOLE_HEIGHT_TOLERANCE_M",
     "DescriptionError",
     "FileReader",
@@ -60,7 +63,12 @@ __all__ = [
     "compile_mjcf",
     "describe",
     "expand_mjcf",
+    "find_package",
+    "foot_candidates",
     "gather_files",
+    "resolve_file",
+    "ros_package_path",
+    "srdf_paths",
     "subtree",
 ]
 
@@ -68,11 +76,26 @@ FOOT_HEIGHT_TOLERANCE_M = 0.02
 """A body whose collision geometry reaches this close to the lowest point (standing) is a foot."""
 SOLE_HEIGHT_TOLERANCE_M = 0.005
 """A foot's collision points this close to its lowest point span its sole."""
+FOOT_CANDIDATE_HEIGHT_FRACTION = 0.15
+"""A URDF link whose frame (standing) is this far up the robot's height, or lower, may be a foot.
+
+Measured from the lowest link frame, as a fraction of the span between the
+lowest and the highest link frame: ankles, feet, soles and toes, not knees
+nor hands hanging by the thighs. A collision mesh of such a link that cannot
+be read is an error when the feet are found from the collision geometry."""
 MAX_INCLUDE_DEPTH = 16
 """Deepest chain of includes followed."""
+MAX_PACKAGE_SEARCH_DEPTH = 8
+"""Deepest directory below a ``ROS_PACKAGE_PATH`` entry searched for a package."""
 
 FileReader = Callable[[str], bytes]
-"""Reads a file named by a model: a path relative to the main file's directory (POSIX)."""
+"""Reads a file named by a model, by the name the model gives it.
+
+MJCF: a path relative to the main file's directory (POSIX), ``meshdir`` and
+includes resolved. URDF: a mesh's ``filename`` exactly as written (a
+``package://`` or ``file://`` URI, or a path relative to the URDF's
+directory) and the SRDF's :func:`srdf_paths`. The reader resolves it
+(:func:`resolve_file`)."""
 
 _ASSET_DIRECTORY = {
     "mesh": "meshdir",
@@ -119,11 +142,13 @@ class FrameNotFoundError(DescriptionError):
 
 
 def gather_files(text: bytes | str, fmt: str, read: FileReader | None) -> dict[str, bytes]:
-    """Every file the model names, read now (by the path :func:`describe` will ask for).
+    """Every file the model names, read now, by the name :func:`describe` will ask for.
 
-    MJCF: includes (recursively) and assets; a file that cannot be read is an
-    error. URDF: collision meshes that can be read (the others are skipped by
-    :func:`describe` with a warning).
+    MJCF: includes (recursively) and assets, by their path relative to the main
+    file's directory; a file that cannot be read is an error. URDF: the
+    collision meshes that can be read, keyed by their ``filename`` exactly as
+    written (the others are left out by :func:`describe`, with a warning or an
+    error), and the SRDF if one is found (:func:`srdf_paths`).
 
     Raises:
         DescriptionError: An MJCF names a file that cannot be read, or is not XML.
@@ -137,14 +162,184 @@ def gather_files(text: bytes | str, fmt: str, read: FileReader | None) -> dict[s
         return files[path]
 
     if fmt == "urdf":
-        for mesh in _parse_xml(text, "the URDF").iter("mesh"):
-            try:
-                recording(_urdf_mesh_path(mesh.get("filename", "")))
-            except (OSError, KeyError, ValueError):
-                continue
+        root = _parse_xml(text, "the URDF")
+        for collision in root.iter("collision"):
+            for mesh in collision.iter("mesh"):
+                filename = mesh.get("filename", "")
+                if filename in files:
+                    continue
+                try:
+                    recording(filename)
+                except (OSError, KeyError, ValueError):
+                    continue
+        _find_srdf(root, recording)
     else:
         expand_mjcf(text, recording if read is not None else None)
     return files
+
+
+# -- where a named file is: paths, package:// and file:// URIs -------------------------
+
+
+def ros_package_path() -> tuple[Path, ...]:
+    """The directories of ``ROS_PACKAGE_PATH`` (``:``-separated; empty entries skipped)."""
+    value = os.environ.get("ROS_PACKAGE_PATH", "")
+    return tuple(Path(entry).expanduser() for entry in value.split(os.pathsep) if entry)
+
+
+def _manifest_name(directory: Path) -> str | None:
+    """The package a directory is (its ``package.xml``'s ``<name>``, else its own name).
+
+    ``None``: no ``package.xml``, not a package.
+    """
+    manifest = directory / "package.xml"
+    try:
+        if not manifest.is_file():
+            return None
+        name = (ET.fromstring(manifest.read_bytes()).findtext("name") or "").strip()
+    except (OSError, ET.ParseError):
+        name = ""
+    return name or directory.name
+
+
+def _is_package(directory: Path, package: str) -> bool:
+    name = _manifest_name(directory)
+    return name is not None and package in (name, directory.name)
+
+
+def _inside(path: Path, roots: Sequence[Path] | None) -> bool:
+    if roots is None:
+        return True
+    try:
+        resolved = path.resolve()
+    except (OSError, RuntimeError):
+        return False
+    return any(resolved.is_relative_to(root) for root in roots)
+
+
+def find_package(
+    package: str,
+    search_path: Sequence[Path],
+    start: Path | None = None,
+    *,
+    within: Sequence[Path] | None = None,
+) -> Path | None:
+    """The directory of a ROS package, found the way ROS tools find it.
+
+    First each directory of ``search_path`` (``ROS_PACKAGE_PATH``) in order:
+    the directory itself if it is the package (named ``package``, or holding
+    a ``package.xml`` that names it), else the packages below it, shallowest
+    first, up to :data:`MAX_PACKAGE_SEARCH_DEPTH` deep — a directory holding a
+    ``package.xml`` is a package, named by its ``<name>`` (or the directory's
+    name), and is not searched further; hidden directories and those marked
+    ``CATKIN_IGNORE``, ``COLCON_IGNORE`` or ``AMENT_IGNORE`` are skipped. Then
+    the ancestors of ``start`` (the URDF's directory), nearest first: one named
+    ``package`` or whose ``package.xml`` names it (example-robot-data's layout:
+    ``example-robot-data/robots/talos_data/robots/talos.urdf`` names its
+    meshes ``package://example-robot-data/robots/talos_data/meshes/…``).
+
+    Args:
+        package: The package's name.
+        search_path: Directories searched first (:func:`ros_package_path`).
+        start: The directory whose ancestors are tried next (``None``: none).
+        within: Only directories inside these (resolved) are considered
+            (``None``: anywhere); the server passes its model directories.
+
+    Returns:
+        The package's directory, or ``None``.
+    """
+    if not package or package in (".", "..") or "/" in package or "\\" in package:
+        return None
+    for entry in search_path:
+        if not entry.is_dir():
+            continue
+        if entry.name == package or _is_package(entry, package):
+            if _inside(entry, within):
+                return entry
+            continue
+        level = [entry]
+        for _ in range(MAX_PACKAGE_SEARCH_DEPTH):
+            deeper = []
+            for directory in level:
+                try:
+                    children = sorted(
+                        child
+                        for child in directory.iterdir()
+                        if child.is_dir() and not child.name.startswith(".")
+                    )
+                except OSError:
+                    continue
+                for child in children:
+                    if _manifest_name(child) is not None:
+                        if _is_package(child, package) and _inside(child, within):
+                            return child
+                    elif not any((child / m).exists() for m in _IGNORE_MARKERS):
+                        deeper.append(child)
+            level = deeper
+    if start is not None:
+        for directory in (start, *start.parents):
+            if not _inside(directory, within):
+                break
+            if directory.name == package or _is_package(directory, package):
+                return directory
+    return None
+
+
+_IGNORE_MARKERS = ("CATKIN_IGNORE", "COLCON_IGNORE", "AMENT_IGNORE")
+
+
+def resolve_file(
+    name: str,
+    directory: Path,
+    *,
+    search_path: Sequence[Path] = (),
+    within: Sequence[Path] | None = None,
+    file_uris: bool = True,
+    packages: dict[str, Path | None] | None = None,
+) -> Path:
+    """The path a file named by a model stands for.
+
+    ``package://PKG/rest`` is ``rest`` in the package's directory
+    (:func:`find_package`: ``search_path``, then the ancestors of
+    ``directory``); ``file:///abs/path`` is ``/abs/path`` (if ``file_uris``);
+    anything else is a path relative to ``directory`` (or absolute).
+
+    Args:
+        name: As the model writes it.
+        directory: The model's directory.
+        search_path: ``ROS_PACKAGE_PATH``'s directories.
+        within: Packages only inside these directories (see :func:`find_package`).
+        file_uris: Whether ``file://`` URIs are read (the server reads none).
+        packages: Packages found so far, by name (filled in; saves searching again).
+
+    Raises:
+        DescriptionError: A package that cannot be found (the message names it
+            and says to set ``ROS_PACKAGE_PATH``), a ``file://`` URI not read,
+            another URI scheme.
+    """
+    scheme, separator, rest = name.partition("://")
+    if not separator:
+        return directory / name
+    if scheme == "file" and file_uris:
+        return Path(rest)
+    if scheme != "package":
+        raise DescriptionError(
+            f"{scheme}:// URIs are not read here: name the file by a path relative to the "
+            "model's directory or by a package:// URI"
+        )
+    package, _, inner = rest.partition("/")
+    known = packages if packages is not None else {}
+    if package not in known:
+        known[package] = find_package(package, search_path, directory, within=within)
+    found = known[package]
+    if found is None:
+        searched = os.pathsep.join(str(p) for p in search_path) or "unset"
+        raise DescriptionError(
+            f"package {package!r} not found (ROS_PACKAGE_PATH: {searched}; no ancestor of the "
+            f"model's directory is named {package!r}): set ROS_PACKAGE_PATH to a directory that "
+            f"holds the package {package!r}"
+        )
+    return found / inner
 
 
 # -- MJCF through MuJoCo's compiler ------------------------------------------------------
@@ -189,6 +384,7 @@ def expand_mjcf(text: bytes | str, read: FileReader | None) -> tuple[str, dict[s
                 directories[key] = compiler.attrib.pop(key)
         strip_paths = compiler.get("strippath", str(strip_paths).lower()) == "true"
         compiler.attrib.pop("strippath", None)
+    _name_unnamed_assets(root)
     assets: dict[str, bytes] = {}
     keys: dict[str, str] = {}
     for element in root.iter():
@@ -203,6 +399,26 @@ def expand_mjcf(text: bytes | str, read: FileReader | None) -> tuple[str, dict[s
                 assets[keys[path]] = _read(read, path, f"<{element.tag} {attribute}>")
             element.set(attribute, keys[path])
     return ET.tostring(root, encoding="unicode"), assets
+
+
+def _name_unnamed_assets(root: ET.Element) -> None:
+    """Name each unnamed file asset as MuJoCo would, before its ``file`` becomes a key.
+
+    MuJoCo names a ``<mesh>``, ``<hfield>``, ``<skin>`` or ``<texture>`` that
+    has a ``file`` and no ``name`` after the file: its base name (after the
+    last ``/`` or backslash) without its last extension, whatever ``meshdir``
+    says (``file="meshes/pelvis.STL"`` is ``pelvis``; ``foot.Part.stl`` is
+    ``foot.Part``; ``.stl`` stays unnamed). Geoms refer to it by that name.
+    """
+    for asset in root.iter("asset"):
+        for element in asset:
+            file = element.get("file")
+            if element.tag not in _ASSET_DIRECTORY or file is None or "name" in element.attrib:
+                continue
+            base = file.replace("\\", "/").rsplit("/", 1)[-1]
+            name = base.rsplit(".", 1)[0] if "." in base else base
+            if name:
+                element.set("name", name)
 
 
 def _parse_xml(text: bytes | str, what: str) -> ET.Element:
@@ -224,6 +440,9 @@ def _read(read: FileReader | None, path: str, what: str) -> bytes:
         raise DescriptionError(f"{what} names {path!r}: {exc}") from None
     except (OSError, KeyError, ValueError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        tried = getattr(exc, "filename", None)
+        if tried is not None and str(tried) != path:
+            reason = f"{reason} (tried {str(tried)!r})"
         raise DescriptionError(f"{what} names {path!r}, which cannot be read: {reason}") from None
 
 
@@ -272,12 +491,21 @@ def compile_mjcf(
 
 @dataclass(frozen=True)
 class FoundContact:
-    """A support: a frame of the model and the corners of its sole in that frame (m)."""
+    """A support: a frame of the model and the corners of its sole in that frame (m).
+
+    Attributes:
+        name: Contact name on the wire, e.g. ``left_foot``.
+        frame: The frame the points are in (a body's or a site's).
+        points_in_frame: ``(k, 3)`` sole corners in the frame (m).
+        friction_coefficient: Coulomb μ.
+        reason: Why this contact, for a person (``poise inspect``).
+    """
 
     name: str
     frame: str
     points_in_frame: np.ndarray
     friction_coefficient: float = 0.8
+    reason: str = ""
 
 
 @dataclass(frozen=True)
@@ -373,6 +601,8 @@ class _Draft:
     keyframes: dict[str, np.ndarray]
     sole_sites: list[FoundContact]
     warnings: list[str]
+    unreadable_meshes: list[_UnreadableMesh] = field(default_factory=list)
+    disabled_collision_pairs: tuple[tuple[str, str], ...] = ()
 
 
 def describe(
@@ -394,7 +624,8 @@ def describe(
         name: Model name.
         contacts: Contacts to use instead of the found ones; one without
             points gets its sole found from its frame's body.
-        keyframe: Keyframe whose pose is the standing pose (MJCF).
+        keyframe: Keyframe whose pose is the standing pose (MJCF ``<key>``; URDF:
+            its SRDF's ``group_state``).
 
     Raises:
         DescriptionError: What to change, on one line.
@@ -405,13 +636,22 @@ def describe(
     if keyframe is not None:
         if keyframe not in draft.keyframes:
             known = ", ".join(draft.keyframes) or "none"
+            where = (
+                " (a URDF's keyframes are its SRDF's group_states: "
+                f"{' or '.join(srdf_paths(text)) or 'NAME.srdf'} beside it, or --srdf FILE)"
+                if fmt == "urdf"
+                else ""
+            )
             raise DescriptionError(
-                f"no keyframe {keyframe!r} in the model; keyframes: {known}", field="keyframe"
+                f"no keyframe {keyframe!r} in the model; keyframes: {known}{where}",
+                field="keyframe",
             )
         draft.configuration = draft.keyframes[keyframe].copy()
     q = draft.configuration
     data = model.createData()
     pin.framesForwardKinematics(model, data, q)
+    if draft.unreadable_meshes:
+        _check_unreadable_meshes(draft, data, contacts, model)
     if contacts is not None:
         found = [_named_contact(spec, model, data, draft.bodies) for spec in contacts]
         source = "given"
@@ -448,6 +688,64 @@ def describe(
         keyframe=keyframe,
         contacts_source=source,
         warnings=tuple(draft.warnings),
+        disabled_collision_pairs=draft.disabled_collision_pairs,
+    )
+
+
+def foot_candidates(model: pin.Model, data: pin.Data, bodies: Sequence[Body]) -> list[str]:
+    """The bodies that may be feet, whatever their collision geometry: the lowest frames.
+
+    A body whose frame, at the pose of ``data``, is within
+    :data:`FOOT_CANDIDATE_HEIGHT_FRACTION` of the span between the lowest and
+    the highest body frame above the lowest one: ankles, feet, soles, toes.
+    """
+    heights = np.array([data.oMf[b.frame_id].translation[2] for b in bodies])
+    limit = heights.min() + FOOT_CANDIDATE_HEIGHT_FRACTION * (heights.max() - heights.min())
+    return [b.name for b, z in zip(bodies, heights, strict=True) if z <= limit + 1e-9]
+
+
+def _check_unreadable_meshes(
+    draft: _Draft, data: pin.Data, contacts: Sequence[ContactSpec] | None, model: pin.Model
+) -> None:
+    """Refuse an unreadable collision mesh where a sole is looked for; summarise the others.
+
+    Where a sole is looked for: on a :func:`foot_candidates` body when the feet
+    are found from the collision geometry, and on a named contact's body and
+    its descendants when its points are not given.
+
+    Raises:
+        DescriptionError: The first unreadable mesh where a sole is looked for:
+            its file, why (the path tried), and what to do.
+    """
+    bodies = draft.bodies
+    if contacts is None:
+        looked_at = set(foot_candidates(model, data, bodies)) if not draft.sole_sites else set()
+        why = "a foot candidate (one of the lowest links standing)"
+    else:
+        looked_at = set()
+        for spec in contacts:
+            if spec.points_in_frame is None and model.existFrame(spec.frame):
+                frame = model.frames[model.getFrameId(spec.frame)]
+                body_frame = (
+                    model.getFrameId(spec.frame) if frame.type == pin.BODY else frame.parentFrame
+                )
+                top = next((i for i, b in enumerate(bodies) if b.frame_id == body_frame), None)
+                if top is not None:
+                    looked_at |= {bodies[i].name for i in subtree(bodies, top)}
+        why = "part of a named foot"
+    for mesh in draft.unreadable_meshes:
+        if mesh.link in looked_at:
+            raise DescriptionError(
+                f"the collision mesh {mesh.filename!r} of link {mesh.link!r}, {why}, cannot be "
+                f"read ({mesh.reason}): make it readable (for a package:// URI set "
+                "ROS_PACKAGE_PATH to a directory that holds the package), or name the feet "
+                "with their points (--contacts / `contacts`)"
+            )
+    first = draft.unreadable_meshes[0]
+    count = len({mesh.filename for mesh in draft.unreadable_meshes})
+    draft.warnings.append(
+        f"{count} collision mesh file(s) cannot be read and are left out, e.g. "
+        f"{first.filename!r} of link {first.link!r}: {first.reason}"
     )
 
 
@@ -648,7 +946,12 @@ class _PinocchioFromMujoco:
                 half_x, half_y = mj.site_size[site, :2]
                 corners = [(sx * half_x, sy * half_y, 0.0) for sx in (1, -1) for sy in (1, -1)]
                 found.append(
-                    FoundContact(name.removesuffix("_sole") + "_foot", name, np.array(corners))
+                    FoundContact(
+                        name.removesuffix("_sole") + "_foot",
+                        name,
+                        np.array(corners),
+                        reason=f"the corners of the box site {name!r}",
+                    )
                 )
         return found
 
@@ -804,21 +1107,19 @@ def _read_urdf(text: bytes | str, read: FileReader | None, name: str) -> _Draft:
     }
     order = [f.name for f in model.frames if f.type == pin.BODY and f.name in links]
     warnings: list[str] = []
+    unreadable: list[_UnreadableMesh] = []
     bodies: list[Body] = []
     for name in order:
-        shapes = [
-            _urdf_collision_shape(c, read, warnings) for c in links[name].findall("collision")
-        ]
+        shapes = []
+        for collision in links[name].findall("collision"):
+            shape, problem = _urdf_collision_shape(collision, read)
+            if problem is not None:
+                unreadable.append(_UnreadableMesh(name, *problem))
+            if shape is not None:
+                shapes.append(shape)
         parent_name = parents.get(name)
         parent = next((i for i, b in enumerate(bodies) if b.name == parent_name), -1)
-        bodies.append(
-            Body.with_shapes(
-                name,
-                parent,
-                model.getFrameId(name, pin.BODY),
-                [shape for shape in shapes if shape is not None],
-            )
-        )
+        bodies.append(Body.with_shapes(name, parent, model.getFrameId(name, pin.BODY), shapes))
     q = pin.neutral(model)
     q[:3] = root_offset.translation
     q[3:7] = pin.Quaternion(root_offset.rotation).coeffs()
@@ -829,13 +1130,36 @@ def _read_urdf(text: bytes | str, read: FileReader | None, name: str) -> _Draft:
     warnings += [
         f"joint {name!r} has no <limit effort>" for name, kind in kinds.items() if kind == "none"
     ]
-    return _Draft(model, bodies, torque_limit, kinds, {}, q, {}, [], warnings)
+    keyframes: dict[str, np.ndarray] = {}
+    disabled: tuple[tuple[str, str], ...] = ()
+    found = _find_srdf(root, read)
+    if found is not None:
+        keyframes, disabled, srdf_warnings = _read_srdf(*found, root, model, q)
+        warnings += srdf_warnings
+    draft = _Draft(model, bodies, torque_limit, kinds, {}, q, keyframes, [], warnings)
+    draft.unreadable_meshes = unreadable
+    draft.disabled_collision_pairs = disabled
+    return draft
+
+
+@dataclass(frozen=True)
+class _UnreadableMesh:
+    """A URDF collision mesh left out: its link, ``filename`` as written, and why."""
+
+    link: str
+    filename: str
+    reason: str
 
 
 def _urdf_collision_shape(
-    collision: ET.Element, read: FileReader | None, warnings: list[str]
-) -> np.ndarray | None:
-    """A URDF ``<collision>``'s points and radii in its link frame (meshes read by MuJoCo)."""
+    collision: ET.Element, read: FileReader | None
+) -> tuple[np.ndarray | None, tuple[str, str] | None]:
+    """A URDF ``<collision>``'s points and radii in its link frame (meshes read by MuJoCo).
+
+    Returns:
+        The shape (``None``: none, or an unreadable mesh), and for an unreadable
+        mesh its ``filename`` and why it cannot be read.
+    """
     origin = collision.find("origin")
     xyz = np.array((origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split(), float)
     rpy = np.array((origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split(), float)
@@ -843,7 +1167,7 @@ def _urdf_collision_shape(
     geometry = collision.find("geometry")
     shape = None if geometry is None or len(geometry) == 0 else geometry[0]
     if shape is None:
-        return None
+        return None, None
 
     def numbers(key: str) -> np.ndarray:
         return np.array(shape.get(key, "1 1 1").split(), float)
@@ -856,24 +1180,24 @@ def _urdf_collision_shape(
         radius, length = float(shape.get("radius", 0)), float(shape.get("length", 0))
         local = _shape_points(_GEOM.mjGEOM_CYLINDER, np.array([radius, length / 2]), None)
     elif shape.tag == "mesh":
-        local = _urdf_mesh_points(shape, read, warnings)
+        try:
+            local = _urdf_mesh_points(shape, read)
+        except DescriptionError as exc:
+            return None, (shape.get("filename", ""), str(exc))
     else:
-        return None
-    return None if local is None else _placed(local, pin.SE3(rotation, xyz))
+        return None, None
+    return (None if local is None else _placed(local, pin.SE3(rotation, xyz))), None
 
 
-def _urdf_mesh_path(filename: str) -> str:
-    """A URDF mesh's path relative to the URDF's directory (``package://pkg/x`` → ``x``)."""
-    return filename.split("://", 1)[1].split("/", 1)[-1] if "://" in filename else filename
+def _urdf_mesh_points(mesh: ET.Element, read: FileReader | None) -> np.ndarray | None:
+    """A URDF mesh's vertices (scaled, own frame), loaded by MuJoCo.
 
-
-def _urdf_mesh_points(
-    mesh: ET.Element, read: FileReader | None, warnings: list[str]
-) -> np.ndarray | None:
-    """A URDF mesh's vertices (scaled, own frame), loaded by MuJoCo; ``None`` if unreadable."""
+    Raises:
+        DescriptionError: The file cannot be read, or MuJoCo cannot load it.
+    """
     filename = mesh.get("filename", "")
-    path = _urdf_mesh_path(filename)
-    key = f"mesh{PurePosixPath(path).suffix.lower()}"
+    key = f"mesh{PurePosixPath(filename).suffix.lower()}"
+    data = _read(read, filename, "<mesh filename>")
     try:
         # Numbers only into the XML: the URDF's text never reaches MuJoCo's parser.
         scale = " ".join(repr(float(x)) for x in mesh.get("scale", "1 1 1").split()[:3])
@@ -881,13 +1205,124 @@ def _urdf_mesh_points(
             f'<mujoco><asset><mesh name="m" file="{key}" scale="{scale}"/></asset>'
             '<worldbody><geom type="mesh" mesh="m"/></worldbody></mujoco>'
         )
-        data = _read(read, path, "<mesh filename>")
         mj = mujoco.MjSpec.from_string(xml, assets={key: data}).compile()
-    except (DescriptionError, ValueError) as exc:
-        warnings.append(f"collision mesh {filename!r} skipped: {exc}")
-        return None
+    except ValueError as exc:
+        detail = " ".join(str(exc).split())
+        raise DescriptionError(f"MuJoCo cannot load {filename!r}: {detail}") from None
     shape = _shape_points(_GEOM.mjGEOM_MESH, np.zeros(3), _mesh_vertices(mj, 0))
     return None if shape is None else _placed(shape, _se3(mj.geom_pos[0], mj.geom_quat[0]))
+
+
+# -- SRDF: keyframes and disabled collisions ---------------------------------------------
+
+
+def srdf_paths(urdf: bytes | str | ET.Element) -> list[str]:
+    """Where a URDF's SRDF is looked for, in order, by the names its reader is asked for.
+
+    For ``<robot name="N">``: ``N.srdf`` beside the URDF, then
+    ``../srdf/N.srdf`` (example-robot-data's ``robots/`` and ``srdf/``
+    directories). A reader may serve another file under the first name
+    (``poise inspect --srdf FILE``). Empty for a robot without a name.
+    """
+    root = urdf if isinstance(urdf, ET.Element) else _parse_xml(urdf, "the URDF")
+    name = (root.get("name") or "").strip()
+    if not name or "/" in name or "\\" in name or name in (".", ".."):
+        return []
+    return [f"{name}.srdf", f"../srdf/{name}.srdf"]
+
+
+def _find_srdf(root: ET.Element, read: FileReader | None) -> tuple[str, bytes] | None:
+    """The first of :func:`srdf_paths` the reader serves, and its bytes (``None``: none)."""
+    if read is None:
+        return None
+    for path in srdf_paths(root):
+        try:
+            return path, read(path)
+        except (OSError, KeyError, ValueError):  # DescriptionError is a ValueError
+            continue
+    return None
+
+
+def _read_srdf(
+    path: str, text: bytes, urdf: ET.Element, model: pin.Model, neutral: np.ndarray
+) -> tuple[dict[str, np.ndarray], tuple[tuple[str, str], ...], list[str]]:
+    """An SRDF's keyframes (``group_state``) and ``disable_collisions`` pairs.
+
+    Each ``group_state`` is a configuration: the URDF's neutral one with the
+    named joints set; states of one name in several groups merge, in file
+    order. Joints the URDF fixes and the SRDF's virtual joints carry no value
+    and are passed over. ``disable_collisions`` pairs become sorted pairs of
+    link names; pairs naming a link the URDF lacks are left out, with one
+    warning.
+
+    Raises:
+        DescriptionError: Not XML, not ``<robot>``, a ``group_state`` naming a
+            joint the URDF lacks, or a value that is not numbers of the joint's size.
+    """
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise DescriptionError(f"the SRDF {path!r} is not valid XML: {exc}") from None
+    if root.tag != "robot":
+        raise DescriptionError(
+            f"an SRDF file's root element is <robot>, not <{root.tag}> ({path!r})"
+        )
+    urdf_joints = {j.get("name", "") for j in urdf.iter("joint")}
+    virtual = {j.get("name", "") for j in root.iter("virtual_joint")}
+    links = {link.get("name", "") for link in urdf.iter("link")}
+    keyframes: dict[str, np.ndarray] = {}
+    for state in root.iter("group_state"):
+        name = state.get("name", "")
+        q = keyframes.setdefault(name, neutral.copy())
+        for joint in state.iter("joint"):
+            joint_name = joint.get("name", "")
+            if model.existJointName(joint_name) and model.getJointId(joint_name) > 1:
+                _set_joint(q, model, model.getJointId(joint_name), joint, name, path)
+            elif joint_name not in urdf_joints and joint_name not in virtual:
+                close = difflib.get_close_matches(joint_name, list(model.names[2:]), n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise DescriptionError(
+                    f"the SRDF {path!r}: group_state {name!r} sets joint {joint_name!r}, which "
+                    f"the URDF does not have{hint}"
+                )
+    pairs: set[tuple[str, str]] = set()
+    unknown: list[str] = []
+    for disabled in root.iter("disable_collisions"):
+        pair = (disabled.get("link1", ""), disabled.get("link2", ""))
+        missing = [link for link in pair if link not in links]
+        if missing:
+            unknown += [link for link in missing if link not in unknown]
+        elif pair[0] != pair[1]:
+            pairs.add(tuple(sorted(pair)))  # type: ignore[arg-type]
+    warnings = []
+    if unknown:
+        warnings.append(
+            f"the SRDF {path!r} disables collisions of {len(unknown)} link(s) the URDF does not "
+            f"have ({', '.join(repr(u) for u in unknown[:3])}{', …' if len(unknown) > 3 else ''})"
+            ": those pairs are ignored"
+        )
+    return keyframes, tuple(sorted(pairs)), warnings
+
+
+def _set_joint(
+    q: np.ndarray, model: pin.Model, joint_id: int, element: ET.Element, state: str, path: str
+) -> None:
+    """Set one joint of ``q`` from an SRDF ``<joint value>`` (a continuous joint: its angle)."""
+    joint = model.joints[joint_id]
+    try:
+        values = [float(v) for v in element.get("value", "").split()]
+    except ValueError:
+        values = []
+    size = 1 if joint.nq == 2 else joint.nq
+    if len(values) != size:
+        raise DescriptionError(
+            f"the SRDF {path!r}: group_state {state!r} gives joint {model.names[joint_id]!r} "
+            f"the value {element.get('value', '')!r}; write {size} number(s)"
+        )
+    if joint.nq == 2:  # continuous: cos, sin
+        q[joint.idx_q : joint.idx_q + 2] = np.cos(values[0]), np.sin(values[0])
+    else:
+        q[joint.idx_q : joint.idx_q + joint.nq] = values
 
 
 # -- contacts from geometry --------------------------------------------------------------
@@ -956,13 +1391,21 @@ def _named_contact(
     frame_id = model.getFrameId(spec.frame)
     if spec.points_in_frame is not None:
         return FoundContact(
-            spec.name, spec.frame, np.array(spec.points_in_frame, float), spec.friction_coefficient
+            spec.name,
+            spec.frame,
+            np.array(spec.points_in_frame, float),
+            spec.friction_coefficient,
+            reason="named, with its points",
         )
     frame = model.frames[frame_id]
     body_frame = frame_id if frame.type == pin.BODY else frame.parentFrame
     top = next(i for i, b in enumerate(bodies) if b.frame_id == body_frame)
     return FoundContact(
-        spec.name, spec.frame, _sole(model, data, bodies, top, frame_id), spec.friction_coefficient
+        spec.name,
+        spec.frame,
+        _sole(model, data, bodies, top, frame_id),
+        spec.friction_coefficient,
+        reason=f"named; its sole from the collision geometry of {bodies[top].name!r} and below",
     )
 
 
@@ -996,17 +1439,31 @@ def _find_feet(model: pin.Model, data: pin.Data, bodies: Sequence[Body]) -> list
     sides = [
         float((data.oMf[bodies[i].frame_id].translation - root.translation) @ lateral) for i in feet
     ]
+    lowest_reason = (
+        "its collision points are among the lowest at the standing pose (within "
+        f"{FOOT_HEIGHT_TOLERANCE_M:g} m of the lowest point)"
+    )
     if len(feet) == 2 and sides[0] * sides[1] < 0:
         names = ["left_foot" if side > 0 else "right_foot" for side in sides]
         order = [0, 1] if names[0] == "left_foot" else [1, 0]
         feet, names = [feet[k] for k in order], [names[k] for k in order]
+        sides = [sides[k] for k in order]
+        reasons = [
+            f"{lowest_reason}; {'left' if side > 0 else 'right'} of the root's heading "
+            f"({abs(side):.3f} m)"
+            for side in sides
+        ]
     else:
         names = [bodies[i].name for i in feet]
+        reasons = [f"{lowest_reason}; {len(feet)} such feet: named by their bodies"] * len(feet)
     # The points are in the frame the body's name resolves to (a joint of the same name
     # would come first), as every user of the contact looks it up by name.
     return [
         FoundContact(
-            name, bodies[i].name, _sole(model, data, bodies, i, model.getFrameId(bodies[i].name))
+            name,
+            bodies[i].name,
+            _sole(model, data, bodies, i, model.getFrameId(bodies[i].name)),
+            reason=reason,
         )
-        for name, i in zip(names, feet, strict=True)
+        for name, i, reason in zip(names, feet, reasons, strict=True)
     ]

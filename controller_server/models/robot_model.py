@@ -29,7 +29,7 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.errors import FrameNotFound, ModelError, ModelNotFound, ServerFault
-from controller_server.files import ServerFileKind
+from controller_server.files import ServerFileKind, display_name, model_directories
 from controller_server.models.description import (
     DescriptionError,
     FoundContact,
@@ -37,6 +37,8 @@ from controller_server.models.description import (
     RobotDescription,
     describe,
     gather_files,
+    resolve_file,
+    ros_package_path,
 )
 from protocol.messages import ContactSpec, JointInfo
 
@@ -71,7 +73,7 @@ MODEL_ASSET_FILES = ServerFileKind(
     kind="file named by a model",
     field="model",
     builtin={},
-    suffixes=(".xml", ".urdf", ".stl", ".obj", ".msh", ".ply", ".png"),
+    suffixes=(".xml", ".urdf", ".srdf", ".stl", ".obj", ".msh", ".ply", ".png"),
     not_found=ModelNotFound,
 )
 """What a model in the model directories may name (includes, meshes, textures): files in them."""
@@ -322,17 +324,51 @@ def _reader(files: dict[str, bytes]) -> Callable[[str], bytes]:
 
 
 def _server_reader(directory: Path) -> Callable[[str], bytes]:
-    """Reads what a model in ``directory`` names, only from the model directories."""
+    """Reads what a model in ``directory`` names, only from the model directories.
 
-    def read(relative: str) -> bytes:
+    Paths are relative to ``directory``. A ``package://`` URI is found as ROS
+    tools find it (:func:`~controller_server.models.description.find_package`),
+    but only in the model directories: the entries of the server's
+    ``ROS_PACKAGE_PATH`` inside them, then the model's ancestors inside them.
+    The file is then read under the same rule as any other (a path resolving
+    outside is refused as a missing file is). The server reads no ``file://``
+    URI.
+    """
+    roots = model_directories()
+    search_path = [entry for entry in ros_package_path() if _inside_any(entry, roots)]
+    packages: dict[str, Path | None] = {}
+
+    def read(name: str) -> bytes:
         try:
-            return MODEL_ASSET_FILES.read_bytes(str(directory / relative))[1]
+            path = resolve_file(
+                name,
+                directory,
+                search_path=search_path,
+                within=roots,
+                file_uris=False,
+                packages=packages,
+            )
+        except DescriptionError:
+            raise DescriptionError(
+                f"it is not a readable file in the server's model directories "
+                f"({display_name(name)} names no file in them)"
+            ) from None
+        try:
+            return MODEL_ASSET_FILES.read_bytes(str(path))[1]
         except ServerFault as exc:
             raise DescriptionError(
                 f"it is not a readable file in the server's model directories ({exc.detail})"
             ) from None
 
     return read
+
+
+def _inside_any(path: Path, roots: tuple[Path, ...]) -> bool:
+    try:
+        resolved = path.resolve()
+    except (OSError, RuntimeError):
+        return False
+    return any(resolved.is_relative_to(root) for root in roots)
 
 
 def _contacts_json(contacts: list[ContactSpec]) -> str:
