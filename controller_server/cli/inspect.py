@@ -40,7 +40,9 @@ def _inspect(args: argparse.Namespace) -> int:
         else [ContactSpec(name=frame, frame=frame) for frame in args.contacts]
     )
     try:
-        description = describe_model(args.model, contacts=contacts, keyframe=args.keyframe)
+        description = describe_model(
+            args.model, contacts=contacts, keyframe=args.keyframe, srdf=args.srdf
+        )
     except FileNotFoundError as exc:
         raise UsageError(str(exc)) from exc
     for line in report_lines(description):
@@ -203,13 +205,24 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="show what Poise reads from a robot file (joints, limits, contacts, pose)",
         description="Print what the server and the simulators read from MODEL (a built-in "
         "name, or an MJCF — a scene with includes is fine — or URDF file): the joints in wire "
-        "order with their ranges, torque limits and actuators, the contacts with their points "
-        "and where they come from, the mass, the standing pose and warnings. "
+        "order with their ranges, torque limits and actuators, the contacts (each foot's body, "
+        "sole points and size, and why it was chosen), the mass, the standing pose, the "
+        "keyframes and warnings. A URDF's package:// meshes are found through "
+        "ROS_PACKAGE_PATH, then the URDF's ancestor directories. "
         "--write-scenario writes a starter scenario for `poise sim`.",
     )
     parser.add_argument("model", metavar="MODEL", help="built-in name or .xml/.urdf file")
     parser.add_argument(
-        "--keyframe", metavar="NAME", help="MJCF keyframe of the standing pose (default: none)"
+        "--keyframe",
+        metavar="NAME",
+        help="keyframe of the standing pose: an MJCF <key>, a URDF's SRDF group_state "
+        "(default: the file's pose)",
+    )
+    parser.add_argument(
+        "--srdf",
+        metavar="FILE",
+        help="a URDF's SRDF (keyframes, disabled collision pairs), instead of NAME.srdf beside "
+        "the URDF or ../srdf/NAME.srdf (NAME: the URDF's <robot name>)",
     )
     parser.add_argument(
         "--contacts",

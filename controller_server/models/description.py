@@ -335,9 +335,8 @@ def resolve_file(
     if found is None:
         searched = os.pathsep.join(str(p) for p in search_path) or "unset"
         raise DescriptionError(
-            f"package {package!r} not found (ROS_PACKAGE_PATH: {searched}; no ancestor of the "
-            f"model's directory is named {package!r}): set ROS_PACKAGE_PATH to a directory that "
-            f"holds the package {package!r}"
+            f"package {package!r} is not in ROS_PACKAGE_PATH ({searched}) nor an ancestor of "
+            f"{str(directory)!r}"
         )
     return found / inner
 
@@ -444,6 +443,27 @@ def _read(read: FileReader | None, path: str, what: str) -> bytes:
         if tried is not None and str(tried) != path:
             reason = f"{reason} (tried {str(tried)!r})"
         raise DescriptionError(f"{what} names {path!r}, which cannot be read: {reason}") from None
+
+
+def _read_or_say_why(read: FileReader | None, path: str) -> bytes:
+    """``read(path)``; a file that cannot be read raises why, with the path tried.
+
+    Raises:
+        DescriptionError: Why the file cannot be read (no reader, the reader's
+            refusal, the system's error and the file tried).
+    """
+    if read is None:
+        raise DescriptionError("no file was given with the model")
+    try:
+        return read(path)
+    except DescriptionError:
+        raise
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        tried = f" (tried {str(exc.filename)!r})" if exc.filename is not None else ""
+        raise DescriptionError(f"{reason}{tried}") from None
+    except (KeyError, ValueError) as exc:
+        raise DescriptionError(str(exc)) from None
 
 
 def _inline_includes(
@@ -720,7 +740,7 @@ def _check_unreadable_meshes(
     bodies = draft.bodies
     if contacts is None:
         looked_at = set(foot_candidates(model, data, bodies)) if not draft.sole_sites else set()
-        why = "a foot candidate (one of the lowest links standing)"
+        why = "a foot candidate: one of the lowest links standing"
     else:
         looked_at = set()
         for spec in contacts:
@@ -735,11 +755,16 @@ def _check_unreadable_meshes(
         why = "part of a named foot"
     for mesh in draft.unreadable_meshes:
         if mesh.link in looked_at:
+            scheme, _, rest = mesh.filename.partition("://")
+            todo = (
+                f"set ROS_PACKAGE_PATH to a directory that holds package {rest.split('/')[0]!r}"
+                if scheme == "package" and rest
+                else "make the file readable"
+            )
             raise DescriptionError(
-                f"the collision mesh {mesh.filename!r} of link {mesh.link!r}, {why}, cannot be "
-                f"read ({mesh.reason}): make it readable (for a package:// URI set "
-                "ROS_PACKAGE_PATH to a directory that holds the package), or name the feet "
-                "with their points (--contacts / `contacts`)"
+                f"the collision mesh {mesh.filename!r} of link {mesh.link!r} ({why}) cannot be "
+                f"read: {mesh.reason}; {todo}, or name feet whose meshes can be read "
+                "(--contacts) or give their points (`contacts` with `points_in_frame`)"
             )
     first = draft.unreadable_meshes[0]
     count = len({mesh.filename for mesh in draft.unreadable_meshes})
@@ -1197,7 +1222,7 @@ def _urdf_mesh_points(mesh: ET.Element, read: FileReader | None) -> np.ndarray |
     """
     filename = mesh.get("filename", "")
     key = f"mesh{PurePosixPath(filename).suffix.lower()}"
-    data = _read(read, filename, "<mesh filename>")
+    data = _read_or_say_why(read, filename)
     try:
         # Numbers only into the XML: the URDF's text never reaches MuJoCo's parser.
         scale = " ".join(repr(float(x)) for x in mesh.get("scale", "1 1 1").split()[:3])

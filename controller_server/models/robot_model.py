@@ -32,6 +32,7 @@ from controller_server.errors import FrameNotFound, ModelError, ModelNotFound, S
 from controller_server.files import ServerFileKind, display_name, model_directories
 from controller_server.models.description import (
     DescriptionError,
+    FileReader,
     FoundContact,
     FrameNotFoundError,
     RobotDescription,
@@ -300,19 +301,40 @@ def load_robot_model(
         read = _server_reader(path.parent)
     else:
         raise ModelError("no model given: set `model` or `model_text`")
-    # Every file the model names is read now, so the cache key covers them all.
+    # Every file the model names is read now, so the cache key covers them all; for a
+    # model on the server, why a file could not be read is kept for the messages.
+    refused: dict[str, str] = {}
+
+    def reading(name: str) -> bytes:
+        try:
+            return read(name)
+        except DescriptionError as exc:
+            if model_text is None:
+                refused[name] = str(exc)
+            raise
+
     try:
-        files = gather_files(text, model_format, read)
+        files = gather_files(text, model_format, reading)
     except DescriptionError as exc:
         raise ModelError(str(exc)) from None
     contacts_json = None if contacts is None else _contacts_json(contacts)
     return _load_cached(
-        text, tuple(sorted(files.items())), name, model_format, contacts_json, keyframe
+        text,
+        tuple(sorted(files.items())),
+        name,
+        model_format,
+        contacts_json,
+        keyframe,
+        tuple(sorted(refused.items())),
     )
 
 
-def _reader(files: dict[str, bytes]) -> Callable[[str], bytes]:
+def _reader(files: dict[str, bytes], refused: dict[str, str] | None = None) -> FileReader:
+    """Reads ``files`` only; a name in ``refused`` says why it could not be read."""
+
     def read(path: str) -> bytes:
+        if refused and path in refused:
+            raise DescriptionError(refused[path])
         if path not in files:
             raise DescriptionError(
                 "it is not among the files sent with the model (`model_assets`); a sent "
@@ -397,6 +419,7 @@ def _load_uncached(
     fmt: str,
     contacts_json: str | None,
     keyframe: str | None,
+    refused: tuple[tuple[str, str], ...] = (),
 ) -> RobotModel:
     contacts = (
         None
@@ -405,7 +428,12 @@ def _load_uncached(
     )
     try:
         description = describe(
-            text, fmt, read=_reader(dict(files)), name=name, contacts=contacts, keyframe=keyframe
+            text,
+            fmt,
+            read=_reader(dict(files), dict(refused)),
+            name=name,
+            contacts=contacts,
+            keyframe=keyframe,
         )
     except FrameNotFoundError as exc:
         raise FrameNotFound(exc.frame, exc.available) from None
