@@ -13,7 +13,9 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
-from functools import lru_cache
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -89,7 +91,9 @@ def model_format(path: Path) -> str:
     return "urdf" if path.suffix.lower() == ".urdf" else "mjcf"
 
 
-def local_reader(path: Path, srdf: Path | None = None) -> FileReader:
+def local_reader(
+    path: Path, srdf: Path | None = None, *, opened: dict[Path, int | None] | None = None
+) -> FileReader:
     """Reads the files a model names, from the client's disk.
 
     Paths are relative to the model's directory; ``package://`` URIs are found
@@ -101,6 +105,8 @@ def local_reader(path: Path, srdf: Path | None = None) -> FileReader:
         path: The model file.
         srdf: An SRDF served in place of the first of the URDF's
             :func:`~controller_server.models.description.srdf_paths`.
+        opened: Filled with every file tried and its modification time (ns;
+            ``None``: missing), so a cache can tell when one changed.
 
     Raises:
         DescriptionError: ``srdf`` given for a model without a ``<robot name>``.
@@ -119,12 +125,32 @@ def local_reader(path: Path, srdf: Path | None = None) -> FileReader:
 
     def read(name: str) -> bytes:
         if name in served:
-            return served[name].read_bytes()
-        return resolve_file(
-            name, directory, search_path=search_path, packages=packages
-        ).read_bytes()
+            file = served[name]
+        else:
+            file = resolve_file(name, directory, search_path=search_path, packages=packages)
+        if opened is not None:
+            opened[file] = _modified_ns(file)
+        return file.read_bytes()
 
     return read
+
+
+def _modified_ns(path: Path) -> int | None:
+    try:
+        return path.stat().st_mtime_ns
+    except OSError:
+        return None
+
+
+@dataclass(frozen=True)
+class _Described:
+    description: RobotDescription
+    opened: dict[Path, int | None]
+
+
+_DESCRIBED: OrderedDict[tuple[object, ...], _Described] = OrderedDict()
+_DESCRIBED_KEPT = 16
+_DESCRIBED_LOCK = threading.Lock()
 
 
 def describe_model(
@@ -134,7 +160,10 @@ def describe_model(
     keyframe: str | None = None,
     srdf: str | Path | None = None,
 ) -> RobotDescription:
-    """What Poise reads from a built-in or a model file (cached per file, contacts and keyframe).
+    """What Poise reads from a built-in or a model file.
+
+    Cached per file, contacts, keyframe, SRDF and ``ROS_PACKAGE_PATH``, while
+    no file read for it (the model, its includes, meshes, SRDF) has changed.
 
     Args:
         model: A built-in name or a model file.
@@ -149,16 +178,30 @@ def describe_model(
     path = resolve_model_path(model).resolve()
     srdf_path = None if srdf is None else _srdf_file(srdf, path)
     contacts_json = None if contacts is None else json.dumps([c.model_dump() for c in contacts])
-    return _describe(
-        path,
-        path.stat().st_mtime_ns,
-        contacts_json,
-        keyframe,
-        srdf_path,
-        None if srdf_path is None else srdf_path.stat().st_mtime_ns,
-        # Packages are looked up on every read: a changed ROS_PACKAGE_PATH reads again.
-        os.environ.get("ROS_PACKAGE_PATH", ""),
+    key = (path, contacts_json, keyframe, srdf_path, os.environ.get("ROS_PACKAGE_PATH", ""))
+    with _DESCRIBED_LOCK:
+        cached = _DESCRIBED.get(key)
+        if cached is not None:
+            _DESCRIBED.move_to_end(key)
+    if cached is not None and all(_modified_ns(f) == t for f, t in cached.opened.items()):
+        return cached.description
+    opened: dict[Path, int | None] = {path: _modified_ns(path)}
+    description = describe(
+        path.read_bytes(),
+        model_format(path),
+        read=local_reader(path, srdf_path, opened=opened),
+        name=path.stem,
+        contacts=None
+        if contacts_json is None
+        else [ContactSpec.model_validate(c) for c in json.loads(contacts_json)],
+        keyframe=keyframe,
     )
+    with _DESCRIBED_LOCK:
+        _DESCRIBED[key] = _Described(description, opened)
+        _DESCRIBED.move_to_end(key)
+        while len(_DESCRIBED) > _DESCRIBED_KEPT:
+            _DESCRIBED.popitem(last=False)
+    return description
 
 
 def _srdf_file(srdf: str | Path, model: Path) -> Path:
@@ -170,31 +213,6 @@ def _srdf_file(srdf: str | Path, model: Path) -> Path:
     if model_format(model) != "urdf":
         raise DescriptionError(f"--srdf {srdf}: an SRDF goes with a URDF, not {model.name}")
     return path.resolve()
-
-
-@lru_cache(maxsize=16)
-def _describe(
-    path: Path,
-    mtime_ns: int,
-    contacts_json: str | None,
-    keyframe: str | None,
-    srdf: Path | None,
-    srdf_mtime_ns: int | None,
-    package_path_variable: str,
-) -> RobotDescription:
-    contacts = (
-        None
-        if contacts_json is None
-        else [ContactSpec.model_validate(c) for c in json.loads(contacts_json)]
-    )
-    return describe(
-        path.read_bytes(),
-        model_format(path),
-        read=local_reader(path, srdf),
-        name=path.stem,
-        contacts=contacts,
-        keyframe=keyframe,
-    )
 
 
 def hello_model(model: str, *, srdf: str | Path | None = None) -> dict[str, Any]:

@@ -75,6 +75,7 @@ def report_lines(description: RobotDescription) -> list[str]:
         f"standing pose: {pose}; base at ({q[0]:.3f}, {q[1]:.3f}, {q[2]:.3f}) m, "
         f"CM height {com[2]:.3f} m",
         f"keyframes: {', '.join(description.keyframes) or 'none'}",
+        *_disabled_pairs_lines(description),
         "joints (wire order): name, kind, range, torque limit, actuator",
     ]
     for joint_id in range(2, model.njoints):
@@ -114,6 +115,16 @@ def report_lines(description: RobotDescription) -> list[str]:
         ]
     lines += [f"warning: {warning}" for warning in description.warnings]
     return lines
+
+
+def _disabled_pairs_lines(description: RobotDescription) -> list[str]:
+    pairs = description.disabled_collision_pairs
+    if not pairs:
+        return []
+    shown = ", ".join(f"{a}–{b}" for a, b in pairs[:3])
+    return [
+        f"disabled collision pairs (SRDF): {len(pairs)}: {shown}{', …' if len(pairs) > 3 else ''}"
+    ]
 
 
 def _sole_size(frame_in_world: object, points_in_frame: object) -> tuple[float, float]:
