@@ -20,14 +20,31 @@ With :class:`CurveKeys` the connection is encrypted and authenticated with
 ZeroMQ's CURVE mechanism; a server that refuses the client's key does not
 answer at all, so that shows as a :class:`ServerTimeout`.
 
+The files a sent model names (``model_assets``: includes, meshes) travel by
+content: the ``hello`` names each by its SHA-256 (``model_asset_hashes``), a
+server that lacks some answers ``ASSETS_MISSING`` listing them, the client
+uploads those with ``asset`` messages in chunks that fit the server's
+``max_message_bytes`` and repeats the ``hello``. The server keeps them, so a
+reconnect or the next run uploads nothing, and a robot's meshes reach the
+server whatever their size. :attr:`ControllerClient.uploaded_asset_bytes`
+counts what was sent.
+
+An ``error`` with ``seq`` −1 (the server could not read the request: too
+large, garbled) is the answer to the one request in flight: it raises
+:class:`ServerError` with the server's code and detail, not a timeout.
+
 With ``record=PATH`` every request sent and every reply received (errors and
 late replies included) is written to an MCAP log by a
 :class:`~protocol.recording.Recorder` (see :mod:`protocol.recording`); the
-recording never raises into the caller and is closed by :meth:`close`.
+recording never raises into the caller and is closed by :meth:`close`. The
+``hello`` is recorded as the caller gave it, files inline, with the reply
+that settled it; the file transfer (``asset`` uploads, ``ASSETS_MISSING``)
+is not recorded, so the log replays on any server.
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import time
@@ -45,6 +62,8 @@ from protocol.codec import decode, encode
 from protocol.endpoints import check_endpoint
 from protocol.errors import ErrorCode, PoiseError, ProtocolError
 from protocol.messages import (
+    Asset,
+    AssetReceived,
     Bye,
     Command,
     ContactSpec,
@@ -72,6 +91,14 @@ log = logging.getLogger("poise.client")
 
 CURVE_KEY_LENGTH = 40
 """Length of a Z85-encoded CURVE key (32 bytes of key material)."""
+ASSET_CHUNK_BYTES = 1024 * 1024
+"""Largest chunk of a file per ``asset`` message: the server's broker hashes and writes
+each between other clients' requests, so a chunk costs them at most about a millisecond."""
+ASSET_MESSAGE_OVERHEAD_BYTES = 4096
+"""Room left in the server's ``max_message_bytes`` for an ``asset`` message's other keys."""
+ASSET_ROUNDS = 3
+"""Uploads before a ``hello`` that still misses files gives up (another client's uploads
+may evict files of a cache too small for both)."""
 
 
 class ServerTimeout(PoiseError, TimeoutError):
@@ -79,7 +106,21 @@ class ServerTimeout(PoiseError, TimeoutError):
 
 
 class ServerError(ProtocolError):
-    """The server answered a request with an ``error`` message."""
+    """The server answered a request with an ``error`` message.
+
+    Attributes:
+        reply: The ``error`` message as received (``missing_asset_hashes``,
+            ``max_message_bytes``); ``None`` if the client made the error up.
+    """
+
+    reply: Error | None = None
+
+    @classmethod
+    def of(cls, reply: Error, seq: int) -> ServerError:
+        """The error for ``reply``, the answer to the request ``seq``."""
+        error = cls(reply.code, reply.field, reply.detail, seq)
+        error.reply = reply
+        return error
 
 
 class InvalidKeyFile(PoiseError, ValueError):
@@ -240,6 +281,12 @@ class ControllerClient:
         self._socket: zmq.Socket | None = None
         self._receive_timeout_ms = -1
         self._hello: Hello | None = None
+        self._files_by_hash: dict[str, bytes] = {}
+        self._hash_of_path: dict[str, str] = {}
+        self.uploaded_asset_bytes = 0
+        """Bytes of model files uploaded to the server (``asset`` chunks) by this client."""
+        self.uploaded_assets = 0
+        """Files whose upload completed."""
         self._seq = 0
         self._pending_seq: int | None = None
         self._pending_state: State | None = None
@@ -263,6 +310,7 @@ class ControllerClient:
         model_text: str | None = None,
         model_format: str = "mjcf",
         model_assets: dict[str, bytes] | None = None,
+        model_asset_hashes: dict[str, str] | None = None,
         keyframe: str | None = None,
         controller: str = "momentum",
         params: Mapping[str, Any] | None = None,
@@ -276,6 +324,10 @@ class ControllerClient:
     ) -> Welcome:
         """Open a session (``hello`` → ``welcome``); see :class:`protocol.Hello`.
 
+        ``model_assets`` go by hash, uploaded only if the server lacks them (see
+        the module docstring); ``model_asset_hashes`` names files the server
+        already holds for this client.
+
         Raises:
             ServerError: The server refused the model, controller or parameters.
             ServerTimeout: No answer within ``timeout_s``.
@@ -285,6 +337,7 @@ class ControllerClient:
             model_text=model_text,
             model_format=model_format,  # type: ignore[arg-type]
             model_assets=model_assets,
+            model_asset_hashes=model_asset_hashes,
             keyframe=keyframe,
             controller=controller,
             params=dict(params or {}),
@@ -296,6 +349,12 @@ class ControllerClient:
             imu_position_in_frame=imu_position_in_frame,
             imu_orientation_in_frame_xyzw=imu_orientation_in_frame_xyzw,
         )
+        self._files_by_hash = {}
+        self._hash_of_path = {}
+        for path, data in (model_assets or {}).items():
+            sha256 = hashlib.sha256(data).hexdigest()
+            self._files_by_hash[sha256] = data
+            self._hash_of_path[path] = sha256
         return self._handshake()
 
     @property
@@ -392,8 +451,108 @@ class ControllerClient:
         if self._hello is None:
             raise PoiseError("call connect() before sending requests")
         self._needs_reconnect = False
-        self.welcome = self._send(self._hello, Welcome, self.timeout_s)
-        return self.welcome
+        hello = self._hello
+        wire = hello
+        if self._hash_of_path:  # the files by hash: the hello stays small
+            wire = hello.model_copy(
+                update={
+                    "model_assets": None,
+                    "model_asset_hashes": {
+                        **(hello.model_asset_hashes or {}),
+                        **self._hash_of_path,
+                    },
+                }
+            )
+        uploads = 0
+        while True:
+            try:
+                self.welcome = self._send_hello(wire, hello)
+                return self.welcome
+            except ServerError as exc:
+                missing = exc.reply.missing_asset_hashes if exc.reply is not None else None
+                if exc.code != ErrorCode.ASSETS_MISSING or not missing or exc.reply is None:
+                    raise
+                unknown = [sha256 for sha256 in missing if sha256 not in self._files_by_hash]
+                if unknown:
+                    detail = (
+                        f"the server lacks {len(unknown)} files this client has not got (by "
+                        f"SHA-256: {', '.join(h[:12] + '…' for h in unknown)}); send them in "
+                        "model_assets"
+                    )
+                elif uploads == ASSET_ROUNDS:
+                    detail = (
+                        f"{len(missing)} files are still missing after {uploads} uploads: the "
+                        "server's asset cache (`poise serve --asset-cache-bytes`) is too small "
+                        "for them, or other clients' uploads keep evicting them"
+                    )
+                else:
+                    self._upload(missing, exc.reply.max_message_bytes)
+                    uploads += 1
+                    continue
+                raise ServerError(exc.code, exc.field, detail, exc.seq) from None
+
+    def _send_hello(self, wire: Hello, logged: Hello) -> Welcome:
+        """Send the ``hello`` on the wire; record it as the caller gave it (files inline).
+
+        A hello answered ``ASSETS_MISSING`` is the file transfer's business: not recorded.
+        """
+        sent_ns = time.time_ns()
+        seq = self._post(wire, record=False)
+        reply: Message | None = None
+        transfer = False
+        try:
+            reply = self._await(seq, "hello", Welcome, self.timeout_s, record=False)
+            return reply  # type: ignore[return-value]
+        except ServerError as exc:
+            reply, transfer = exc.reply, exc.code == ErrorCode.ASSETS_MISSING
+            raise
+        finally:
+            if self.recorder is not None and not transfer:
+                self.recorder.record(logged.model_copy(update={"seq": seq}), "sent", sent_ns)
+                if reply is not None:
+                    self.recorder.record(reply, "received")
+
+    def _upload(self, missing: list[str], max_message_bytes: int | None) -> None:
+        """Upload each file in chunks that fit the server's ``max_message_bytes``."""
+        chunk_bytes = ASSET_CHUNK_BYTES
+        if max_message_bytes is not None:
+            chunk_bytes = min(chunk_bytes, max_message_bytes - ASSET_MESSAGE_OVERHEAD_BYTES)
+        if chunk_bytes <= 0:
+            raise PoiseError(
+                f"the server's max_message_bytes={max_message_bytes} leaves no room for a file "
+                "chunk; ask its operator to raise `poise serve --max-message-bytes`"
+            )
+        total = sum(len(self._files_by_hash[sha256]) for sha256 in missing)
+        log.info(
+            "uploading %d files (%.1f MB) to the server at %s",
+            len(missing),
+            total / 1e6,
+            self.endpoint,
+        )
+        for sha256 in missing:
+            data = self._files_by_hash[sha256]
+            offset = 0
+            while True:
+                chunk = data[offset : offset + chunk_bytes]
+                request = Asset(
+                    sha256=sha256, size_bytes=len(data), offset_bytes=offset, data=chunk
+                )
+                reply: AssetReceived = self._send(
+                    request, AssetReceived, self.timeout_s, record=False
+                )
+                self.uploaded_asset_bytes += len(chunk)
+                if reply.complete:
+                    break
+                if reply.received_bytes <= offset or reply.received_bytes > len(data):
+                    raise ServerError(
+                        ErrorCode.UNEXPECTED_MESSAGE,
+                        "received_bytes",
+                        f"the server acknowledged {reply.received_bytes} bytes of "
+                        f"{sha256[:12]}… after a chunk at {offset}",
+                        reply.seq,
+                    )
+                offset = reply.received_bytes
+            self.uploaded_assets += 1
 
     def _remember_params(self, changes: Mapping[str, Any]) -> None:
         """Merge accepted changes into the ``hello`` that a reconnect repeats.
@@ -455,13 +614,16 @@ class ControllerClient:
             self._socket.close(linger=0)
             self._socket = None
 
-    def _send(self, message: Message, reply_type: type[Any], timeout_s: float) -> Any:
-        return self._await(self._post(message), message.type, reply_type, timeout_s)
+    def _send(
+        self, message: Message, reply_type: type[Any], timeout_s: float, *, record: bool = True
+    ) -> Any:
+        seq = self._post(message, record=record)
+        return self._await(seq, message.type, reply_type, timeout_s, record=record)
 
-    def _post(self, message: Message) -> int:
+    def _post(self, message: Message, *, record: bool = True) -> int:
         self._seq += 1
         message = message.model_copy(update={"seq": self._seq})
-        if self.recorder is not None:
+        if self.recorder is not None and record:
             self.recorder.record(message, "sent")
         try:  # a DEALER with no connected peer (a refused CURVE handshake) blocks on send
             self._open_socket().send(encode(message))
@@ -469,7 +631,15 @@ class ControllerClient:
             self._timed_out(message.type, self.timeout_s)
         return self._seq
 
-    def _await(self, seq: int, request_type: str, reply_type: type[Any], timeout_s: float) -> Any:
+    def _await(
+        self,
+        seq: int,
+        request_type: str,
+        reply_type: type[Any],
+        timeout_s: float,
+        *,
+        record: bool = True,
+    ) -> Any:
         socket = self._open_socket()
         deadline = time.monotonic() + timeout_s
         wait_ms = max(1, int(timeout_s * 1000))
@@ -482,13 +652,16 @@ class ControllerClient:
             except zmq.Again:
                 break
             reply = decode(data)
-            if self.recorder is not None:
+            if self.recorder is not None and record:
                 self.recorder.record(reply, "received")
-            if reply.seq != seq:  # late reply to a request that already timed out
+            # seq -1: the server could not read the request; with one request in flight
+            # (this client never has more), it answers that one.
+            unreadable = isinstance(reply, Error) and reply.seq == -1
+            if reply.seq != seq and not unreadable:  # late reply to a request that timed out
                 wait_ms = int((deadline - time.monotonic()) * 1000)
                 continue
             if isinstance(reply, Error):
-                raise ServerError(reply.code, reply.field, reply.detail, reply.seq)
+                raise ServerError.of(reply, seq)
             if not isinstance(reply, reply_type):
                 raise ServerError(
                     ErrorCode.UNEXPECTED_MESSAGE,

@@ -13,7 +13,11 @@ from dataclasses import dataclass
 from controller_server.blas import BLAS_THREAD_VARIABLES
 from protocol.codec import MAX_MESSAGE_BYTES
 
-__all__ = ["SINGLE_THREADED_BLAS", "ServeConfig"]
+__all__ = ["MIN_MESSAGE_BYTES", "SINGLE_THREADED_BLAS", "ServeConfig"]
+
+MIN_MESSAGE_BYTES = 64 * 1024
+"""Smallest ``max_message_bytes``: a state of a large robot and an ``asset`` chunk of
+useful size (the client leaves a few kB of the cap to the message around the chunk) fit."""
 
 SINGLE_THREADED_BLAS = BLAS_THREAD_VARIABLES
 """Environment of worker processes: linear algebra on one thread each, whatever the
@@ -42,8 +46,12 @@ class ServeConfig:
             longer counts: its worker skips it if it has not started it.
         max_message_bytes: Largest request answered; larger ones get
             ``LIMIT_EXCEEDED`` up to twice this size, beyond which ZeroMQ drops
-            the connection.
-        max_model_bytes: Largest ``hello.model_text``, file sent with it, and model or clip file.
+            the connection. At least :data:`MIN_MESSAGE_BYTES`.
+        max_model_bytes: Largest ``hello.model_text``, file sent with it (inline or
+            uploaded), and model or clip file.
+        asset_cache_bytes: Bytes of uploaded model files the server keeps (least recently
+            used out), uploads in progress included.
+        max_upload_bytes_per_client: Declared sizes of one client's unfinished uploads.
         model_cache_entries: Parsed models each worker keeps (least recently used out).
         model_dirs: Directories whose files a client may name as model or clip.
         curve_secret_key: Server certificate (``poise keygen``) for CurveZMQ;
@@ -67,6 +75,8 @@ class ServeConfig:
     max_in_flight: int = 2
     max_message_bytes: int = MAX_MESSAGE_BYTES
     max_model_bytes: int = 4 * 1024 * 1024
+    asset_cache_bytes: int = 256 * 1024 * 1024
+    max_upload_bytes_per_client: int = 64 * 1024 * 1024
     model_cache_entries: int = 16
     model_dirs: tuple[str, ...] = ()
     curve_secret_key: str | None = None
@@ -87,11 +97,18 @@ class ServeConfig:
             "max_in_flight": self.max_in_flight,
             "max_message_bytes": self.max_message_bytes,
             "max_model_bytes": self.max_model_bytes,
+            "asset_cache_bytes": self.asset_cache_bytes,
+            "max_upload_bytes_per_client": self.max_upload_bytes_per_client,
             "model_cache_entries": self.model_cache_entries,
         }
         for name, value in positive.items():
             if not value > 0 or value != value or value == float("inf"):
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        if self.max_message_bytes < MIN_MESSAGE_BYTES:
+            raise ValueError(
+                f"max_message_bytes must be at least {MIN_MESSAGE_BYTES}, got "
+                f"{self.max_message_bytes}"
+            )
         if not self.endpoints:
             raise ValueError("give at least one endpoint to bind")
 

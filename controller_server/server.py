@@ -18,6 +18,10 @@ robot needs:
   stuck ``recycle_after_s`` later is killed and replaced;
 - **caps** (``LIMIT_EXCEEDED``): sessions per server and per client, requests
   in flight per session, message size;
+- **the asset cache** (:mod:`controller_server.asset_cache`): it answers ``asset``
+  uploads itself, and a ``hello`` naming files (``model_asset_hashes``) the client
+  has not uploaded with ``ASSETS_MISSING``; the workers read the files from the
+  cache's private directory, so an upload serves every worker;
 - **identity**: a session belongs to the client's routing id *and* its CURVE
   key (or, without CURVE, its peer's IP address), so another peer reusing a
   routing id does not inherit it, and ``stats`` shows a client its own
@@ -43,12 +47,13 @@ from typing import Any
 import msgpack
 import zmq
 
+from controller_server.asset_cache import AssetCache
 from controller_server.config import SINGLE_THREADED_BLAS, ServeConfig
 from controller_server.session_table import SessionTable
 from controller_server.worker import REPLY_HEADER, REQUEST_HEADER, Channel
-from protocol.codec import encode
-from protocol.errors import ErrorCode
-from protocol.messages import Error, Message, SessionStats, Stats
+from protocol.codec import decode, encode
+from protocol.errors import AssetsMissing, ErrorCode, ProtocolError
+from protocol.messages import Asset, Error, Hello, Message, SessionStats, Stats
 
 __all__ = ["ControllerServer", "ServerStartError"]
 
@@ -135,18 +140,32 @@ def _error(seq: int, code: ErrorCode, field: str, detail: str) -> Error:
     return Error(seq=max(seq, -1), code=code, field=field, detail=detail)
 
 
-def _peek(payload: bytes) -> tuple[str | None, int]:
-    """``type`` and ``seq`` of a request without validating it (msgpack only)."""
+def _error_of(exc: ProtocolError, max_message_bytes: int) -> Error:
+    """The ``error`` reply of a refused request (with what ``ASSETS_MISSING`` adds)."""
+    missing = exc.missing if isinstance(exc, AssetsMissing) else None
+    return Error(
+        seq=max(exc.seq, -1),
+        code=exc.code,
+        field=exc.field,
+        detail=exc.detail,
+        missing_asset_hashes=missing,
+        max_message_bytes=max_message_bytes if missing is not None else None,
+    )
+
+
+def _peek(payload: bytes) -> tuple[str | None, int, bool]:
+    """``type``, ``seq`` and whether it names files by hash, without validating (msgpack only)."""
     try:
         head = msgpack.unpackb(payload, raw=False, strict_map_key=True)
     except Exception:  # garbage: the full decode says what is wrong
-        return None, -1
+        return None, -1, False
     if not isinstance(head, dict):
-        return None, -1
+        return None, -1, False
     kind, seq = head.get("type"), head.get("seq")
     return (
         kind if isinstance(kind, str) else None,
         seq if type(seq) is int and 0 <= seq < 2**63 else -1,
+        bool(head.get("model_asset_hashes")),
     )
 
 
@@ -171,7 +190,9 @@ class ControllerServer:
         self._ids = itertools.count(1)
         self._generation = itertools.count()
         self._next_worker_check_s = 0.0
-        self._local = SessionTable()  # answers requests that have no session
+        # Answers requests that have no session.
+        self._local = SessionTable(max_message_bytes=config.max_message_bytes)
+        self._assets: AssetCache | None = None
         self._context = zmq.Context()
         self._authenticator: Any = None
         self._frontend = self._context.socket(zmq.ROUTER)
@@ -196,6 +217,12 @@ class ControllerServer:
                     "bind another port (port * picks a free one)"
                 )
             raise ServerStartError(f"cannot bind {endpoint!r}: {exc}{hint}") from None
+        self._assets = AssetCache(
+            config.asset_cache_bytes,
+            max_file_bytes=config.max_model_bytes,
+            max_upload_bytes_per_client=config.max_upload_bytes_per_client,
+            idle_timeout_s=config.session_timeout_s,
+        )
 
     # ----------------------------------------------------------------- set-up
 
@@ -244,6 +271,13 @@ class ControllerServer:
                 if fd in self._workers_by_fd:
                     self._serve_worker(self._workers_by_fd[fd])
 
+    @property
+    def assets(self) -> AssetCache:
+        """The asset cache (made once the endpoints are bound)."""
+        if self._assets is None:
+            raise RuntimeError("the server is closed")
+        return self._assets
+
     def _spawn_worker(self) -> None:
         identity = f"w{next(self._generation)}".encode()
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -256,6 +290,7 @@ class ControllerServer:
                     identity.decode(),
                     str(theirs.fileno()),
                     self.config.to_json(),
+                    str(self.assets.directory),
                 ],
                 env={**os.environ, **SINGLE_THREADED_BLAS},
                 pass_fds=(theirs.fileno(),),
@@ -360,18 +395,24 @@ class ControllerServer:
                     "",
                     f"message of {len(payload)} bytes exceeds the server's limit of "
                     f"{self.config.max_message_bytes} (`poise serve --max-message-bytes`)",
-                ),
+                ).model_copy(update={"max_message_bytes": self.config.max_message_bytes}),
             )
             return
         self._route(identity, client, payload)
 
     def _route(self, identity: bytes, client: str, payload: bytes) -> None:
-        kind, seq = _peek(payload)
+        kind, seq, by_hash = _peek(payload)
         route = self.routes.get(identity)
         if route is not None and route.client != client:
             route = None  # another peer reusing this routing id: not its session
-        if kind == "hello":
-            self._open(identity, client, route, seq, payload)
+        if kind == "asset":
+            self._reply(identity, self._receive_asset(identity, client, payload))
+        elif kind == "hello":
+            refusal = self._check_assets(client, payload) if by_hash else None
+            if refusal is not None:
+                self._reply(identity, refusal)
+            else:
+                self._open(identity, client, route, seq, payload)
         elif kind == "stats":
             self._gather_stats(identity, client, payload)
         elif route is not None:
@@ -402,6 +443,36 @@ class ControllerServer:
             self.routes[identity] = route
             worker.routes.add(identity)
         self._forward(identity, route, seq, payload, self.config.hello_deadline_s)
+
+    def _receive_asset(self, identity: bytes, client: str, payload: bytes) -> Message:
+        """The answer to an ``asset`` request: the cache's, or an error."""
+        try:
+            request = decode(payload, self.config.max_message_bytes)
+            if not isinstance(request, Asset):  # a peeked type that was not the real one
+                return self._local.handle(identity, payload)
+            return self.assets.receive(identity, client, request)
+        except ProtocolError as exc:
+            return _error_of(exc, self.config.max_message_bytes)
+        except OSError as exc:  # the cache's disk: full, or gone
+            log.error("asset cache: %s", exc)
+            detail = f"the server cannot store the file now ({exc.strerror or exc}); retry later"
+            return _error(-1, ErrorCode.LIMIT_EXCEEDED, "", detail)
+
+    def _check_assets(self, client: str, payload: bytes) -> Error | None:
+        """The refusal of a ``hello`` naming files by hash: invalid, or files missing.
+
+        ``None``: every file is in the cache for this client; the worker serves it.
+        """
+        try:
+            request = decode(payload, self.config.max_message_bytes)
+        except ProtocolError as exc:
+            return _error_of(exc, self.config.max_message_bytes)
+        if not isinstance(request, Hello) or not request.model_asset_hashes:
+            return None
+        missing = self.assets.missing(client, request.model_asset_hashes.values())
+        if not missing:
+            return None
+        return _error_of(AssetsMissing(missing, request.seq), self.config.max_message_bytes)
 
     def _session_cap_refusal(self, client: str) -> str:
         if len(self.routes) >= self.config.max_sessions:
@@ -625,6 +696,8 @@ class ControllerServer:
         count = sum(map(len, expired.values()))
         if count:
             log.info("%d sessions expired", count)
+        if self._assets is not None and self._assets.expire(now_s):
+            log.info("idle asset uploads dropped")
         return count
 
     def _gather_stats(self, identity: bytes, client: str, payload: bytes) -> None:
@@ -696,3 +769,6 @@ class ControllerServer:
             self._authenticator.stop()
         self._frontend.close(linger=0)
         self._context.term()
+        if self._assets is not None:
+            self._assets.close()
+            self._assets = None

@@ -9,9 +9,15 @@ session. The server's own errors (:mod:`controller_server.errors`) become
 wire codes here, at the edge. Which client a key belongs to, caps, deadlines
 and expiry are the broker's business (:mod:`controller_server.server`).
 
+A ``hello`` naming files by hash (``model_asset_hashes``) takes them from the
+broker's asset cache (:mod:`controller_server.asset_cache`), each hashed again
+as it is read; one that is not there is ``ASSETS_MISSING``.
+
 With a ``record_dir``, every session's conversation (the requests it
 received, the replies it sent) is recorded to its own MCAP file, opened by
 its ``hello`` and closed when the session ends (:mod:`protocol.recording`).
+Its ``hello`` is recorded with every file inline (``model_assets``), so the
+log replays on a server that never saw them.
 """
 
 from __future__ import annotations
@@ -25,10 +31,21 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from controller_server.asset_cache import read_asset
 from controller_server.errors import ServerFault, wire_code
-from protocol.codec import decode
-from protocol.errors import ErrorCode, ProtocolError
-from protocol.messages import Bye, Error, Hello, Message, SessionStats, SetParams, State, Stats
+from protocol.codec import MAX_MESSAGE_BYTES, decode
+from protocol.errors import AssetsMissing, ErrorCode, ProtocolError
+from protocol.messages import (
+    Asset,
+    Bye,
+    Error,
+    Hello,
+    Message,
+    SessionStats,
+    SetParams,
+    State,
+    Stats,
+)
 
 if TYPE_CHECKING:
     from controller_server.session import Session
@@ -77,12 +94,22 @@ class SessionTable:
         max_model_bytes: Largest ``hello.model_text`` (bytes of UTF-8) and file of
             ``hello.model_assets`` accepted.
         record_dir: Record each session to ``<UTC time>-<session id>.mcap`` here.
+        max_message_bytes: Largest request decoded (the broker refuses larger ones first).
+        asset_dir: The broker's asset cache, where ``hello.model_asset_hashes`` are
+            looked up (``None``: every such file is missing).
     """
 
     def __init__(
-        self, max_model_bytes: int = 4 * 1024 * 1024, record_dir: str | Path | None = None
+        self,
+        max_model_bytes: int = 4 * 1024 * 1024,
+        record_dir: str | Path | None = None,
+        *,
+        max_message_bytes: int = MAX_MESSAGE_BYTES,
+        asset_dir: str | Path | None = None,
     ):
         self.max_model_bytes = max_model_bytes
+        self.max_message_bytes = max_message_bytes
+        self.asset_dir = asset_dir
         self.record_dir = None if record_dir is None else Path(record_dir)
         self.sessions: dict[bytes, Session] = {}
         self.recorders: dict[bytes, Recorder] = {}
@@ -103,20 +130,28 @@ class SessionTable:
         return reply
 
     def _answer(self, key: bytes, payload: bytes) -> tuple[Message | None, Message]:
-        """The decoded request (``None`` if it does not decode) and the reply."""
+        """The decoded request (``None`` if it does not decode) and the reply.
+
+        A ``hello`` comes back with the files it named by hash inline.
+        """
         seq = -1
         request = None
         try:
-            request = decode(payload)
+            request = decode(payload, self.max_message_bytes)
             seq = request.seq
+            if isinstance(request, Hello) and request.model_asset_hashes:
+                request = self._with_files_inline(request)
             return request, self._dispatch(key, request)
         except ProtocolError as exc:  # the request itself is malformed
             self._count_error(key)
+            missing = exc.missing if isinstance(exc, AssetsMissing) else None
             error = Error(
                 seq=exc.seq if exc.seq >= 0 else seq,
                 code=exc.code,
                 field=exc.field,
                 detail=exc.detail,
+                missing_asset_hashes=missing,
+                max_message_bytes=self.max_message_bytes if missing is not None else None,
             )
             return request, error
         except ServerFault as exc:  # the server cannot serve it: mapped to a wire code here
@@ -126,6 +161,25 @@ class SessionTable:
             log.exception("internal error while serving a request")
             error = Error(seq=seq, code=ErrorCode.INTERNAL, detail=f"{type(exc).__name__}: {exc}")
             return request, error
+
+    def _with_files_inline(self, hello: Hello) -> Hello:
+        """``hello`` with the files of ``model_asset_hashes`` read into ``model_assets``.
+
+        Raises:
+            AssetsMissing: A file is not in the asset cache (evicted since the broker
+                looked, or no cache).
+        """
+        files = dict(hello.model_assets or {})
+        missing = []
+        for path, sha256 in (hello.model_asset_hashes or {}).items():
+            data = read_asset(self.asset_dir, sha256)
+            if data is None:
+                missing.append(sha256)
+            else:
+                files[path] = data
+        if missing:
+            raise AssetsMissing(missing, hello.seq)
+        return hello.model_copy(update={"model_assets": files, "model_asset_hashes": None})
 
     def _count_error(self, key: bytes) -> None:
         session = self.sessions.get(key)
@@ -232,7 +286,12 @@ class SessionTable:
             raise ProtocolError(
                 ErrorCode.UNEXPECTED_MESSAGE,
                 "type",
-                f"{request.type!r} is a reply; send hello, state, set_params, stats or bye",
+                (
+                    "asset uploads are answered by the server (`poise serve`), not by a "
+                    "session table"
+                    if isinstance(request, Asset)
+                    else f"{request.type!r} is a reply; send hello, state, set_params, stats or bye"
+                ),
                 request.seq,
             )
         session = self.sessions.get(key)

@@ -1,9 +1,11 @@
 """A worker process: the sessions the broker gives it, one request at a time.
 
 Started by the broker (:mod:`controller_server.server`) as
-``python -m controller_server.worker IDENTITY FD CONFIG_JSON``, with
+``python -m controller_server.worker IDENTITY FD CONFIG_JSON ASSET_DIR``, with
 single-threaded BLAS (:data:`~controller_server.config.SINGLE_THREADED_BLAS`),
-``FD`` its end of a Unix socket pair with the broker. The two speak in
+``FD`` its end of a Unix socket pair with the broker, ``ASSET_DIR`` the
+broker's asset cache (:mod:`controller_server.asset_cache`), whose files a
+``hello`` names by hash. The two speak in
 messages of frames over it (:class:`Channel`):
 
 ========================================================  ================================
@@ -191,15 +193,29 @@ def _serve_request(table: SessionTable, header: bytes, payload: bytes) -> list[b
     return [b"rep", REPLY_HEADER.pack(request_id, key in table.sessions), reply]
 
 
-def run_worker(identity: bytes, channel: Channel, config: ServeConfig) -> None:
-    """Serve the broker over ``channel`` until told to stop or the broker is gone."""
+def run_worker(
+    identity: bytes, channel: Channel, config: ServeConfig, asset_dir: str | None = None
+) -> None:
+    """Serve the broker over ``channel`` until told to stop or the broker is gone.
+
+    Args:
+        identity: The worker's name in the broker's logs.
+        channel: Its end of the link with the broker.
+        config: The server's options.
+        asset_dir: Directory of the broker's asset cache (``None``: none).
+    """
     from controller_server.files import set_model_directories
     from controller_server.models.robot_model import set_model_cache_size
 
     set_model_directories(config.model_dirs, max_file_bytes=config.max_model_bytes)
     set_model_cache_size(config.model_cache_entries)
     _warm_up(config.max_model_bytes)  # its drop returns the warm-up session's memory
-    table = SessionTable(max_model_bytes=config.max_model_bytes, record_dir=config.record_dir)
+    table = SessionTable(
+        max_model_bytes=config.max_model_bytes,
+        record_dir=config.record_dir,
+        max_message_bytes=config.max_message_bytes,
+        asset_dir=asset_dir,
+    )
     gc.freeze()
     try:
         channel.send([b"ready"])
@@ -230,8 +246,9 @@ def run_worker(identity: bytes, channel: Channel, config: ServeConfig) -> None:
 
 
 def main(argv: list[str]) -> int:
-    """``python -m controller_server.worker IDENTITY FD CONFIG_JSON``."""
-    identity, fd, config_json = argv
+    """``python -m controller_server.worker IDENTITY FD CONFIG_JSON [ASSET_DIR]``."""
+    identity, fd, config_json, *rest = argv
+    asset_dir = rest[0] if rest else None
     config = ServeConfig.from_json(config_json)
     # The broker decides when workers stop: a Ctrl-C or a service manager's SIGTERM
     # reaches the whole process group, and the broker still drains through us.
@@ -242,7 +259,7 @@ def main(argv: list[str]) -> int:
         format=f"%(asctime)s %(name)s[{identity}] %(levelname)s %(message)s",
     )
     channel = Channel(socket.socket(fileno=int(fd)), blocking=True)
-    run_worker(identity.encode(), channel, config)
+    run_worker(identity.encode(), channel, config, asset_dir)
     return 0
 
 

@@ -2,10 +2,12 @@
 
 from protocol.codec import MAX_MESSAGE_BYTES, decode, encode
 from protocol.endpoints import InvalidEndpoint, check_endpoint
-from protocol.errors import ErrorCode, PoiseError, ProtocolError
+from protocol.errors import AssetsMissing, ErrorCode, PoiseError, ProtocolError
 from protocol.messages import (
     MESSAGE_TYPES,
     PROTOCOL_VERSION,
+    Asset,
+    AssetReceived,
     Bye,
     Command,
     ContactSpec,
@@ -29,6 +31,9 @@ __all__ = [
     "MAX_MESSAGE_BYTES",
     "MESSAGE_TYPES",
     "PROTOCOL_VERSION",
+    "Asset",
+    "AssetReceived",
+    "AssetsMissing",
     "Bye",
     "Command",
     "ContactSpec",

@@ -21,7 +21,7 @@ from protocol.messages import MESSAGE_TYPES, PROTOCOL_VERSION, Message
 __all__ = ["MAX_MESSAGE_BYTES", "decode", "encode"]
 
 MAX_MESSAGE_BYTES = 16 * 1024 * 1024
-"""Largest message accepted (a model file sent in ``hello`` fits)."""
+"""Largest message :func:`decode` accepts unless told otherwise (``poise serve``'s default)."""
 
 _ERROR_CODES = {
     "non_finite": ErrorCode.NON_FINITE,
@@ -42,11 +42,13 @@ def _seq_of(payload: dict[Any, Any]) -> int:
     return seq if type(seq) is int and 0 <= seq < 2**63 else -1
 
 
-def decode(data: bytes) -> Message:
+def decode(data: bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> Message:
     """Parse and validate one message.
 
     Args:
         data: The bytes of one ZeroMQ frame.
+        max_bytes: Longer data is refused before it is parsed (a server passes its
+            ``--max-message-bytes``).
 
     Returns:
         The validated message, an instance of the class its ``type`` names.
@@ -54,9 +56,9 @@ def decode(data: bytes) -> Message:
     Raises:
         ProtocolError: With the code and field of the first problem found.
     """
-    if len(data) > MAX_MESSAGE_BYTES:
+    if len(data) > max_bytes:
         raise ProtocolError(
-            ErrorCode.MALFORMED, "", f"message of {len(data)} bytes exceeds {MAX_MESSAGE_BYTES}"
+            ErrorCode.MALFORMED, "", f"message of {len(data)} bytes exceeds {max_bytes}"
         )
     try:
         payload = msgpack.unpackb(data, raw=False, strict_map_key=True)

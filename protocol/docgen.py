@@ -51,6 +51,7 @@ another `version` is answered by an `error` with code `UNSUPPORTED_VERSION`.
 | `state` | `command` | one control tick |
 | `set_params` | `params` | change controller parameters at run time (all or nothing) |
 | `stats` | `stats` | tick counts and compute-time percentiles of this client's sessions |
+| `asset` | `asset_received` | upload a chunk of a model's file into the server's asset cache |
 | `bye` | `bye` | close the session |
 | anything bad | `error` | typed error naming the field; the session continues |
 
@@ -77,6 +78,27 @@ answered with `LIMIT_EXCEEDED`. A client sends its next request after the
 reply to the last (or keeps at most `--max-in-flight` outstanding, default 2).
 The limits on `state` values below (|value| ≤ …) are part of the contract:
 beyond them a value is refused with `INVALID_FIELD` naming the field.
+A request the server cannot read (too large, not msgpack) is answered with
+`seq` −1: a client with one request in flight takes it as that request's answer.
+
+**Files of a sent model, whatever their size.** A `hello` with `model_text`
+gives the files the text names (includes, meshes) inline in `model_assets`,
+or by content in `model_asset_hashes` (path → SHA-256). The second keeps the
+`hello` small: a server without a file answers `ASSETS_MISSING` with
+`missing_asset_hashes` and its `max_message_bytes`; the client uploads each
+missing file with `asset` messages (chunks in order, each within
+`max_message_bytes`, each answered by `asset_received`), then repeats the
+`hello`. The server checks each file's SHA-256 once it is complete and keeps
+it in a cache shared by its workers (`--asset-cache-bytes`, least recently
+used out), so the next `hello` of that client (a reconnect, the next run)
+uploads nothing. A client sees only the files it uploaded itself (another
+client cannot learn which files the server holds). `ControllerClient` sends
+every file this way; a log records the `hello` with its files inline, so it
+replays on any server.
+
+Versioning: an addition that leaves every message of this version valid (a
+new optional key, message type or error code) keeps the version number; a
+change that makes an old message invalid or change meaning takes the next.
 """
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from enum import IntEnum
 from typing import Any
 
-__all__ = ["ErrorCode", "PoiseError", "ProtocolError"]
+__all__ = ["AssetsMissing", "ErrorCode", "PoiseError", "ProtocolError"]
 
 
 class ErrorCode(IntEnum):
@@ -52,7 +52,16 @@ class ErrorCode(IntEnum):
         16,
         (
             "A server cap was hit (sessions per server or client, requests in flight per "
-            "session, message size, model size); the detail names the cap and its option."
+            "session, message size, model size, asset uploads); the detail names the cap and "
+            "its option."
+        ),
+    )
+    ASSETS_MISSING = (
+        17,
+        (
+            "The server's asset cache lacks files `hello.model_asset_hashes` names (or this "
+            "client has not uploaded them): `missing_asset_hashes` lists their SHA-256; upload "
+            "each with `asset`, then repeat the `hello`."
         ),
     )
 
@@ -93,3 +102,22 @@ class ProtocolError(PoiseError):
         self.seq = seq
         where = f" at {field!r}" if field else ""
         super().__init__(f"{self.code.name}{where}: {detail}")
+
+
+class AssetsMissing(ProtocolError):
+    """A ``hello`` names files by SHA-256 that the server does not hold for this client.
+
+    Attributes:
+        missing: SHA-256 (lowercase hex) of each file to upload, sorted, without repeats.
+    """
+
+    def __init__(self, missing: list[str], seq: int = -1):
+        self.missing = sorted(set(missing))
+        super().__init__(
+            ErrorCode.ASSETS_MISSING,
+            "model_asset_hashes",
+            f"the server's asset cache lacks {len(self.missing)} of the files named in "
+            "`model_asset_hashes` (or this client never uploaded them): upload each with "
+            "`asset`, then repeat the hello",
+            seq,
+        )

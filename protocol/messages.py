@@ -13,7 +13,14 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    WithJsonSchema,
+    model_validator,
+)
 
 from protocol.arrays import (
     MAX_ABS_ACCELERATION,
@@ -42,8 +49,11 @@ __all__ = [
     "MAX_ABS_TIME_S",
     "MAX_ABS_VELOCITY",
     "MAX_ABS_WRENCH",
+    "MAX_MODEL_FILES",
     "MESSAGE_TYPES",
     "PROTOCOL_VERSION",
+    "Asset",
+    "AssetReceived",
     "BaseEstimateDiagnostics",
     "Bye",
     "Command",
@@ -59,6 +69,7 @@ __all__ = [
     "PriorityLevelReport",
     "SessionStats",
     "SetParams",
+    "Sha256Hex",
     "State",
     "Stats",
     "WeightedDiagnostics",
@@ -67,7 +78,14 @@ __all__ = [
 ]
 
 PROTOCOL_VERSION = 2
-"""Version of this wire contract; a message with another version is refused."""
+"""Version of this wire contract; a message with another version is refused.
+
+An addition that leaves every message of the version valid (a new optional key, a new
+message type, a new error code) keeps the version; a change that makes an old message
+invalid or mean something else takes the next one."""
+
+MAX_MODEL_FILES = 512
+"""Files a ``hello`` may name with its model, inline and by hash together."""
 
 ParamValue = float | int | bool | str | list[float] | dict[str, float | str | list[float]] | None
 """A controller parameter: a number, flag, name, vector, a small record
@@ -76,6 +94,9 @@ ParamValue = float | int | bool | str | list[float] | dict[str, float | str | li
 
 LoggedBytes = Annotated[bytes, WithJsonSchema({"type": "string", "contentEncoding": "base64"})]
 """A file's bytes: binary on the wire (msgpack), base64 in a JSON log (protocol.recording)."""
+
+Sha256Hex = Annotated[str, StringConstraints(pattern=r"^[0-9a-f]{64}$")]
+"""A SHA-256 digest as 64 lowercase hexadecimal characters (``hashlib``'s ``hexdigest``)."""
 
 
 def wire_field(
@@ -155,7 +176,17 @@ class Hello(Message):
         'with, relative to its directory, e.g. `{"robot.xml": …, "assets/foot.stl": …}`. '
         "A sent model reads no other file.",
         default=None,
-        max_length=512,
+        max_length=MAX_MODEL_FILES,
+    )
+    model_asset_hashes: dict[str, Sha256Hex] | None = wire_field(
+        "Files `model_text` names, as `model_assets` but by the SHA-256 of their bytes "
+        '(lowercase hex), e.g. `{"assets/foot.stl": "9f86d0…"}`: the server takes them from '
+        "its asset cache, where this client put them with `asset`. Unknown ones get "
+        "`ASSETS_MISSING` listing them. So the hello stays small whatever the files' size, "
+        "and a file is sent once per server. A path is in at most one of the two maps; "
+        f"together at most {MAX_MODEL_FILES} files.",
+        default=None,
+        max_length=MAX_MODEL_FILES,
     )
     contacts: list[ContactSpec] | None = wire_field(
         "Contact definitions (see ContactSpec). Default: every `*_sole` box site of an MJCF, "
@@ -226,6 +257,23 @@ class Hello(Message):
     def _one_model_source(self) -> Hello:
         if (self.model is None) == (self.model_text is None):
             raise ValueError("give exactly one of `model` (name or path) and `model_text`")
+        return self
+
+    @model_validator(mode="after")
+    def _files_named_once(self) -> Hello:
+        by_hash = self.model_asset_hashes or {}
+        if by_hash and self.model_text is None:
+            raise ValueError(
+                "model_asset_hashes are files of a sent `model_text`; a `model` by name reads "
+                "the server's own files"
+            )
+        both = sorted(set(by_hash) & set(self.model_assets or {}))
+        if both:
+            raise ValueError(f"{both[0]!r} is in both model_assets and model_asset_hashes")
+        if len(by_hash) + len(self.model_assets or {}) > MAX_MODEL_FILES:
+            raise ValueError(
+                f"more than {MAX_MODEL_FILES} files in model_assets and model_asset_hashes together"
+            )
         return self
 
 
@@ -648,6 +696,60 @@ class Stats(Message):
     )
 
 
+class Asset(Message):
+    """Upload a file a model names into the server's asset cache, one chunk per message.
+
+    Chunks go in order: the first at offset 0, each next one at the `received_bytes` of
+    the last reply, each message within the server's `max_message_bytes` (stated in
+    `ASSETS_MISSING`). Once the whole file has arrived and its SHA-256 is checked, it is
+    in the cache (shared by the server's workers, bounded by `poise serve
+    --asset-cache-bytes`, least recently used out) and a `hello` of this client may name
+    it in `model_asset_hashes`. A file is at most `--max-model-bytes`; a client's
+    unfinished uploads total at most `--max-upload-bytes-per-client`, and one idle longer
+    than `--session-timeout` is dropped. No session is needed.
+    """
+
+    type: Literal["asset"] = "asset"
+    sha256: Sha256Hex = wire_field("SHA-256 of the whole file, 64 lowercase hex characters.")
+    size_bytes: int = wire_field(
+        "Size of the whole file (the same in every chunk of an upload).",
+        unit="byte",
+        ge=0,
+        le=2**40,
+        strict=True,
+    )
+    offset_bytes: int = wire_field(
+        "Where `data` starts in the file: 0 starts (or restarts) the upload, else the "
+        "`received_bytes` of the last reply.",
+        unit="byte",
+        default=0,
+        ge=0,
+        le=2**40,
+        strict=True,
+    )
+    data: LoggedBytes = wire_field(
+        "The file's bytes from `offset_bytes` on; it must not reach past `size_bytes`.",
+        strict=True,
+    )
+
+
+class AssetReceived(Message):
+    """Reply to ``asset``: how much of the file the server holds."""
+
+    type: Literal["asset_received"] = "asset_received"
+    sha256: Sha256Hex = wire_field("SHA-256 of the file, as in the request.")
+    received_bytes: int = wire_field(
+        "Bytes of the file received so far: the next chunk's `offset_bytes`.",
+        unit="byte",
+        ge=0,
+        strict=True,
+    )
+    complete: bool = wire_field(
+        "The whole file is in the cache, its SHA-256 checked (also when it was there "
+        "already: the rest need not be sent)."
+    )
+
+
 class Bye(Message):
     """Close this client's session; the server answers ``bye``."""
 
@@ -666,10 +768,34 @@ class Error(Message):
         'Dotted path of the offending key, `""` for the whole message.', default=""
     )
     detail: str = wire_field("What is wrong, with the bad value.")
+    missing_asset_hashes: list[str] | None = wire_field(
+        "With `ASSETS_MISSING`: the SHA-256 of each file of `hello.model_asset_hashes` to "
+        "upload with `asset` before repeating the hello.",
+        default=None,
+    )
+    max_message_bytes: int | None = wire_field(
+        "With `ASSETS_MISSING` and with a message refused for its size (`LIMIT_EXCEEDED`): "
+        "the largest message the server accepts (`poise serve --max-message-bytes`); each "
+        "`asset` chunk must fit in it.",
+        unit="byte",
+        default=None,
+    )
 
 
 MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.model_fields["type"].default: cls
-    for cls in (Hello, Welcome, State, Command, SetParams, Params, Stats, Bye, Error)
+    for cls in (
+        Hello,
+        Welcome,
+        State,
+        Command,
+        SetParams,
+        Params,
+        Stats,
+        Asset,
+        AssetReceived,
+        Bye,
+        Error,
+    )
 }
 """Message classes by their ``type`` string."""

@@ -34,6 +34,8 @@ def serve_config(args: argparse.Namespace) -> ServeConfig:
         max_in_flight=args.max_in_flight,
         max_message_bytes=args.max_message_bytes,
         max_model_bytes=args.max_model_bytes,
+        asset_cache_bytes=args.asset_cache_bytes,
+        max_upload_bytes_per_client=args.max_upload_bytes_per_client,
         model_cache_entries=args.model_cache,
         model_dirs=tuple(str(Path(d).resolve()) for d in args.model_dir or []),
         curve_secret_key=args.curve_secret_key,
@@ -194,14 +196,31 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         type=int,
         default=16 * 1024 * 1024,
         metavar="BYTES",
-        help="largest request answered (default: 16 MiB)",
+        help="largest request answered, at least 65536 (default: 16 MiB); a model's files "
+        "of any size still arrive, uploaded in chunks of this size",
     )
     serve.add_argument(
         "--max-model-bytes",
         type=int,
         default=4 * 1024 * 1024,
         metavar="BYTES",
-        help="largest model text or model/clip file (default: 4 MiB)",
+        help="largest model text or model/clip file, and file sent with a model (default: 4 MiB)",
+    )
+    serve.add_argument(
+        "--asset-cache-bytes",
+        type=int,
+        default=256 * 1024 * 1024,
+        metavar="BYTES",
+        help="bytes of files sent with models (meshes) the server keeps, by SHA-256, so a "
+        "client uploads each once; least recently used out (default: 256 MiB, in a private "
+        "temporary directory removed at exit)",
+    )
+    serve.add_argument(
+        "--max-upload-bytes-per-client",
+        type=int,
+        default=64 * 1024 * 1024,
+        metavar="BYTES",
+        help="total size of one client's unfinished file uploads (default: 64 MiB)",
     )
     serve.add_argument(
         "--model-cache",

@@ -4,6 +4,8 @@ import numpy as np
 
 from protocol.errors import ErrorCode
 from protocol.messages import (
+    Asset,
+    AssetReceived,
     Bye,
     Command,
     ContactSpec,
@@ -19,6 +21,10 @@ from protocol.messages import (
     WeightedDiagnostics,
     Welcome,
 )
+
+FILE = bytes(range(256))
+FILE_SHA256 = "40aff2e9d2d8922e47afd4648e6967497158785fbd1da870e7110266bf944880"
+"""SHA-256 of :data:`FILE`."""
 
 CONTACT = ContactSpec(name="left_foot", frame="left_sole", points_in_frame=[(0.1, 0.05, 0.0)])
 
@@ -126,4 +132,23 @@ def sample_messages():
             keyframe="home",
             contacts=[ContactSpec(name="left_foot", frame="left_ankle_roll_link")],
         ),
+        # The same scene with its mesh by hash, its upload in two chunks, the replies.
+        Hello(
+            seq=8,
+            model_text='<mujoco><include file="robot.xml"/></mujoco>',
+            model_assets={"robot.xml": b"<mujoco/>"},
+            model_asset_hashes={"assets/foot.stl": FILE_SHA256},
+        ),
+        Error(
+            seq=8,
+            code=ErrorCode.ASSETS_MISSING,
+            field="model_asset_hashes",
+            detail="upload them",
+            missing_asset_hashes=[FILE_SHA256],
+            max_message_bytes=1_000_000,
+        ),
+        Asset(seq=9, sha256=FILE_SHA256, size_bytes=256, offset_bytes=0, data=FILE[:100]),
+        AssetReceived(seq=9, sha256=FILE_SHA256, received_bytes=100, complete=False),
+        Asset(seq=10, sha256=FILE_SHA256, size_bytes=256, offset_bytes=100, data=FILE[100:]),
+        AssetReceived(seq=10, sha256=FILE_SHA256, received_bytes=256, complete=True),
     ]

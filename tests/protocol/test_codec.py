@@ -4,10 +4,18 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from protocol import MESSAGE_TYPES, PROTOCOL_VERSION, ErrorCode, ProtocolError, decode, encode
+from protocol import (
+    MAX_MESSAGE_BYTES,
+    MESSAGE_TYPES,
+    PROTOCOL_VERSION,
+    ErrorCode,
+    ProtocolError,
+    decode,
+    encode,
+)
 from protocol.errors import PoiseError
-from protocol.messages import Bye, State
-from tests.protocol.samples import sample_messages
+from protocol.messages import Asset, AssetReceived, Bye, Hello, State
+from tests.protocol.samples import FILE_SHA256, sample_messages
 from tests.protocol.strategies import malformed_maps, msgpack_values
 
 FUZZ = settings(max_examples=4000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -39,6 +47,108 @@ def test_golden_bytes_of_bye():
     expected = b"\x83\xa4type\xa3bye\xa7version\x02\xa3seq\x07"
     assert encode(Bye(seq=7)) == expected
     assert decode(expected) == Bye(seq=7)
+
+
+def test_golden_bytes_of_an_asset_chunk_and_its_reply():
+    """A file's chunk is msgpack `bin`; the digest a 64-character string (`str 8`)."""
+    chunk = Asset(seq=3, sha256=FILE_SHA256, size_bytes=2, offset_bytes=0, data=b"\x00\xff")
+    digest = b"\xa6sha256\xd9@" + FILE_SHA256.encode()
+    expected = (
+        b"\x87\xa4type\xa5asset\xa7version\x02\xa3seq\x03"
+        + digest
+        + b"\xaasize_bytes\x02\xacoffset_bytes\x00\xa4data\xc4\x02\x00\xff"
+    )
+    assert encode(chunk) == expected
+    assert decode(expected) == chunk
+    reply = AssetReceived(seq=3, sha256=FILE_SHA256, received_bytes=2, complete=True)
+    expected = (
+        b"\x86\xa4type\xaeasset_received\xa7version\x02\xa3seq\x03"
+        + digest
+        + b"\xaereceived_bytes\x02\xa8complete\xc3"
+    )
+    assert encode(reply) == expected
+    assert decode(expected) == reply
+
+
+def _hello_by_hash(**changes):
+    payload = {
+        "type": "hello",
+        "version": PROTOCOL_VERSION,
+        "seq": 4,
+        "model_text": "<mujoco/>",
+        "model_asset_hashes": {"mesh.stl": FILE_SHA256},
+    }
+    return msgpack.packb({**payload, **changes})
+
+
+@pytest.mark.parametrize(
+    ("changes", "field", "words"),
+    [
+        (
+            {"model_asset_hashes": {"mesh.stl": FILE_SHA256.upper()}},
+            "model_asset_hashes.mesh.stl",
+            "pattern",
+        ),
+        (
+            {"model_asset_hashes": {"mesh.stl": FILE_SHA256[:-1]}},
+            "model_asset_hashes.mesh.stl",
+            "pattern",
+        ),
+        ({"model_asset_hashes": {"mesh.stl": 7}}, "model_asset_hashes.mesh.stl", "string"),
+        ({"model_assets": {"mesh.stl": b"x"}}, "", "in both"),
+        ({"model_text": None, "model": "thesis_humanoid"}, "", "a `model` by name"),
+        (
+            {"model_asset_hashes": {f"{i}.stl": FILE_SHA256 for i in range(513)}},
+            "model_asset_hashes",
+            "at most 512",
+        ),
+        (
+            {
+                "model_asset_hashes": {f"{i}.stl": FILE_SHA256 for i in range(300)},
+                "model_assets": {f"x{i}.stl": b"" for i in range(300)},
+            },
+            "",
+            "together",
+        ),
+    ],
+    ids=["upper case", "63 digits", "not a string", "both maps", "named model", "513", "600"],
+)
+def test_files_by_hash_are_checked_at_the_edge(changes, field, words):
+    with pytest.raises(ProtocolError) as info:
+        decode(_hello_by_hash(**changes))
+    assert info.value.code == ErrorCode.INVALID_FIELD
+    assert info.value.field == field and info.value.seq == 4
+    assert words in info.value.detail
+    assert isinstance(decode(_hello_by_hash()), Hello)
+
+
+@pytest.mark.parametrize(
+    ("changes", "field"),
+    [
+        ({"size_bytes": -1}, "size_bytes"),
+        ({"size_bytes": 2.0}, "size_bytes"),
+        ({"offset_bytes": -1}, "offset_bytes"),
+        ({"data": "text"}, "data"),
+        ({"sha256": "../../etc/passwd"}, "sha256"),
+    ],
+)
+def test_bad_asset_chunks_get_typed_errors(changes, field):
+    payload = msgpack.unpackb(encode(Asset(seq=5, sha256=FILE_SHA256, size_bytes=2, data=b"ab")))
+    with pytest.raises(ProtocolError) as info:
+        decode(msgpack.packb({**payload, **changes}))
+    assert info.value.code == ErrorCode.INVALID_FIELD
+    assert info.value.field == field and info.value.seq == 5
+
+
+def test_the_size_limit_is_the_callers():
+    """`decode` takes the server's `--max-message-bytes`; the module constant is the default."""
+    big = encode(Asset(sha256=FILE_SHA256, size_bytes=20_000_000, data=bytes(20_000_000)))
+    assert len(big) > MAX_MESSAGE_BYTES
+    with pytest.raises(ProtocolError, match=f"exceeds {MAX_MESSAGE_BYTES}"):
+        decode(big)
+    assert decode(big, max_bytes=64_000_000).data == bytes(20_000_000)
+    with pytest.raises(ProtocolError, match="exceeds 1000"):
+        decode(encode(Bye()) + bytes(1000), max_bytes=1000)
 
 
 def test_arrays_travel_as_little_endian_float64_bin():

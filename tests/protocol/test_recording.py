@@ -146,6 +146,8 @@ def test_every_channel_has_a_json_schema_that_validates_its_messages(tmp_path):
             "set_params",
             "params",
             "stats",
+            "asset",
+            "asset_received",
             "bye",
             "error",
         }
