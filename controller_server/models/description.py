@@ -7,10 +7,12 @@ both free-joint spellings, meshes, ``autolimits``, extra root bodies
 *compiled* MuJoCo model, body by body, so the server's dynamics are the
 simulator's to the last inertia. URDF is read by Pinocchio's parser.
 
-Files are never opened here: every ``<include>`` and asset path goes through
-a ``read`` callable (the server's confines reads to its model directories,
-a client-sent model reads only the files it sent), and MuJoCo compiles from
-memory, so it cannot open a file the caller did not hand over.
+:func:`describe` never opens a file: every ``<include>``, asset, URDF mesh
+and SRDF goes through a ``read`` callable (the server's confines reads to its
+model directories, a client-sent model reads only the files it sent), and
+MuJoCo compiles from memory, so it cannot open a file the caller did not hand
+over. The readers find what a name stands for with :func:`resolve_file`
+(``package://`` URIs as ROS tools find them, :func:`find_package`).
 
 From the model, a :class:`RobotDescription` finds:
 
@@ -22,7 +24,10 @@ From the model, a :class:`RobotDescription` finds:
   sole is the rectangle, aligned with the foot's heading, around its
   collision points within :data:`SOLE_HEIGHT_TOLERANCE_M` of its lowest one.
   A contact may instead be named (a frame without points): its sole is found
-  the same way from that frame's body and its descendants.
+  the same way from that frame's body and its descendants. A URDF collision
+  mesh that cannot be read is left out (one warning for all of them), unless
+  a sole is looked for on its link (a :func:`foot_candidates` link, or a
+  named foot): then it is an error, not a silent choice of other feet.
 * **Torque limits** from every place a file states them: MJCF actuator
   ``forcerange``, a motor's ``ctrlrange`` × gain, × |gear|, and the joint's
   ``actuatorfrcrange`` (defaults classes included, being compiled); URDF
@@ -30,8 +35,10 @@ From the model, a :class:`RobotDescription` finds:
 * **Actuator kinds** per joint (``motor``, ``position``, ``velocity``,
   ``general``, or ``none``), so that a simulator can convert
   position-actuated models to torque motors instead of misusing them.
-* **The standing pose**: a keyframe by name, or the file's reference pose,
-  lifted or lowered so that the lowest contact point is at z = 0.
+* **The standing pose**: a keyframe by name (MJCF ``<key>``; a URDF's SRDF
+  ``group_state``), or the file's reference pose, lifted or lowered so that
+  the lowest contact point is at z = 0.
+* **Disabled collision pairs** from a URDF's SRDF (``disable_collisions``).
 """
 
 from __future__ import annotations
