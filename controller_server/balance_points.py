@@ -11,10 +11,13 @@ from collections.abc import Sequence
 import numpy as np
 
 __all__ = [
+    "MAX_MARGIN_FRACTION",
+    "admissible_cop_polygon",
     "center_of_pressure",
     "centroidal_moment_pivot",
     "closest_point_in_polygon",
     "ground_reference_points",
+    "polygon_width",
     "shrink_polygon",
     "support_polygon",
 ]
@@ -23,6 +26,8 @@ MIN_NORMAL_FORCE_N = 1e-6
 """Below this total normal force the COP and CMP are undefined (NaN)."""
 COLLINEAR_SINE = 1e-9
 """Hull vertices whose edges turn by less than this (sine of the angle) are dropped."""
+MAX_MARGIN_FRACTION = 0.25
+"""A COP margin takes at most this fraction of the support polygon's width from each side."""
 
 
 def center_of_pressure(
@@ -186,6 +191,42 @@ def shrink_polygon(polygon_xy: np.ndarray, margin: float) -> np.ndarray:
         if any(o + margin - (nx * x + ny * y) < limit for nx, ny, o in lines):
             return centre
     return np.array(shrunk)
+
+
+def polygon_width(polygon_xy: np.ndarray) -> float:
+    """Width of a convex counter-clockwise polygon: its smallest extent across an edge (m).
+
+    The distance between the closest pair of parallel lines that hold it, which
+    for a convex polygon rests on one of its edges. A segment or a point has
+    width 0.
+    """
+    points = np.asarray(polygon_xy, dtype=float).reshape(-1, 2).tolist()
+    vertices = _turning_vertices([(x, y) for x, y in points])
+    if len(vertices) < 3:
+        return 0.0
+    width = math.inf
+    for (x0, y0), (x1, y1) in zip(vertices, vertices[1:] + vertices[:1], strict=True):
+        length = math.hypot(x1 - x0, y1 - y0)
+        nx, ny = (y0 - y1) / length, (x1 - x0) / length  # inward normal (counter-clockwise)
+        width = min(width, max(nx * (x - x0) + ny * (y - y0) for x, y in vertices))
+    return width
+
+
+def admissible_cop_polygon(
+    polygon_xy: np.ndarray, margin: float, max_margin_fraction: float = MAX_MARGIN_FRACTION
+) -> np.ndarray:
+    """Where a balance objective may ask for the COP: the support polygon shrunk by a margin.
+
+    The margin (m) is at most ``max_margin_fraction`` of the polygon's width
+    (:func:`polygon_width`), so a narrow support keeps a strip of its own shape
+    instead of collapsing to its centre. A fixed 2 cm margin suits a 9 cm-wide
+    sole, but on one 3 cm-wide sole it leaves only the centre point: a CM
+    beyond it would be driven further out (the COP asked at the centre),
+    whatever the push.
+    """
+    polygon_xy = np.asarray(polygon_xy, dtype=float).reshape(-1, 2)
+    margin = min(margin, max_margin_fraction * polygon_width(polygon_xy))
+    return shrink_polygon(polygon_xy, margin)
 
 
 def _turning_vertices(vertices: list[tuple[float, float]]) -> list[tuple[float, float]]:

@@ -33,8 +33,8 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.balance_points import (
+    admissible_cop_polygon,
     ground_reference_points,
-    shrink_polygon,
     support_polygon,
 )
 from controller_server.constraints import compute_support_equalities
@@ -501,7 +501,7 @@ class MomentumController(Controller):
                 desired_rate,
                 mass,
                 terms.position_com_in_world,
-                shrink_polygon(polygon, p["cop_margin"]),
+                admissible_cop_polygon(polygon, p["cop_margin"]),
                 p["ground_height"],
                 self._gravity,
                 friction_coefficient=min(

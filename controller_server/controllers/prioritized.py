@@ -52,8 +52,8 @@ import pinocchio as pin
 from scipy.linalg import lapack
 
 from controller_server.balance_points import (
+    admissible_cop_polygon,
     ground_reference_points,
-    shrink_polygon,
 )
 from controller_server.behaviors.jump import JUMP_PARAMETERS, StandingJump
 from controller_server.behaviors.observation import Observation
@@ -633,7 +633,7 @@ class PrioritizedController(Controller):
                 mass * np.array([*desired_xy, 0.0]),
                 mass,
                 com,
-                shrink_polygon(layout.support_polygon, p["cop_margin"]),
+                admissible_cop_polygon(layout.support_polygon, p["cop_margin"]),
                 p["ground_height"],
                 self._gravity,
                 friction_coefficient=layout.smallest_friction_coefficient,

@@ -6,7 +6,10 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from controller_server.balance_points import (
+    MAX_MARGIN_FRACTION,
+    admissible_cop_polygon,
     closest_point_in_polygon,
+    polygon_width,
     shrink_polygon,
     support_polygon,
 )
@@ -131,3 +134,47 @@ def test_the_rate_stays_within_the_inscribed_friction_pyramid():
     )
     grip = mu / np.sqrt(2.0) * mass * GRAVITY
     np.testing.assert_allclose(out[:2], [-grip, grip])
+
+
+NARROW_SOLE = np.array([[-0.07, 0.085], [0.13, 0.085], [0.13, 0.115], [-0.07, 0.115]])
+"""One 20 cm × 3 cm sole, its centre line 10 cm left of the origin (counter-clockwise)."""
+
+
+def test_a_polygon_width_is_its_smallest_extent_across():
+    assert polygon_width(NARROW_SOLE) == pytest.approx(0.03)
+    assert polygon_width(SQUARE) == pytest.approx(0.2)
+    triangle = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    assert polygon_width(triangle) == pytest.approx(np.sqrt(0.5))
+    assert polygon_width(np.array([[0.0, 0.0], [1.0, 0.0]])) == 0.0
+
+
+def test_a_wide_support_is_shrunk_by_the_whole_margin():
+    np.testing.assert_allclose(admissible_cop_polygon(SQUARE, 0.02), shrink_polygon(SQUARE, 0.02))
+
+
+def test_a_narrow_sole_keeps_a_strip_where_a_fixed_margin_would_leave_its_centre():
+    """A 2 cm margin on a 3 cm sole: shrink_polygon collapses it to one point (issue 31)."""
+    assert len(shrink_polygon(NARROW_SOLE, 0.02)) == 1
+    admissible = admissible_cop_polygon(NARROW_SOLE, 0.02)
+    margin = MAX_MARGIN_FRACTION * 0.03
+    np.testing.assert_allclose(admissible, shrink_polygon(NARROW_SOLE, margin), atol=1e-15)
+    assert admissible[:, 1].min() == pytest.approx(0.085 + margin)
+    assert admissible[:, 1].max() == pytest.approx(0.115 - margin)
+
+
+def test_on_a_narrow_sole_the_admissible_rate_still_pulls_the_cm_back_toward_the_sole():
+    """The CM 5 mm beyond the sole's centre line, drifting out: the rate asked pulls it back
+    (the COP beyond the CM), where the collapsed polygon asked the COP at the centre line,
+    that is a rate pushing the CM further out."""
+    mass, com = 52.0, np.array([0.03, 0.105, 0.93])
+    desired = np.array([0.0, -300.0, np.nan])  # toward the sole's centre, hard
+    collapsed = admissible_linear_momentum_rate(
+        desired, mass, com, shrink_polygon(NARROW_SOLE, 0.02), 0.0, GRAVITY
+    )
+    assert collapsed[1] > 0.0  # the COP at y = 0.1: the CM is pushed further out
+    rate = admissible_linear_momentum_rate(
+        desired, mass, com, admissible_cop_polygon(NARROW_SOLE, 0.02), 0.0, GRAVITY
+    )
+    lever = com[2] / (mass * GRAVITY)
+    assert rate[1] == pytest.approx((com[1] - (0.115 - MAX_MARGIN_FRACTION * 0.03)) / lever)
+    assert rate[1] < 0.0
