@@ -34,6 +34,7 @@ from protocol.messages import ContactSpec
 
 __all__ = [
     "DescriptionError",
+    "RobotDescription",
     "body_names",
     "builtin_model_names",
     "builtin_model_path",
