@@ -5,6 +5,7 @@ package naming its meshes by ``package://`` URIs, found as ROS tools find them;
 its SRDF's keyframes and disabled collision pairs.
 """
 
+import os
 import shutil
 import subprocess
 import sys
@@ -133,7 +134,17 @@ def test_ros_package_path_comes_before_the_ancestors(capsys, tmp_path, monkeypat
     alone = tmp_path / "elsewhere" / "robot.urdf"
     alone.parent.mkdir()
     shutil.copy(URDF, alone)
-    message = refused(capsys, str(alone))
+    # The real command, in its own process: exit code 2, one line, no traceback.
+    result = subprocess.run(
+        [sys.executable, "-m", "controller_server.cli", "inspect", str(alone)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        stdin=subprocess.DEVNULL,
+        env={k: v for k, v in os.environ.items() if k != "ROS_PACKAGE_PATH"},
+    )
+    assert result.returncode == 2, result.stderr
+    (message,) = result.stderr.splitlines()
     assert message.startswith(
         "poise inspect: the collision mesh "
         "'package://poise_test_description/meshes/left/foot_collision.stl' of link 'left_foot' "

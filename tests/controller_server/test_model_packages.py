@@ -375,3 +375,21 @@ def test_unknown_srdf_links_are_one_warning_and_fixed_joints_pass():
     )
     elbow = description.joint_names.index("left_elbow")
     assert description.standing_configuration[7 + elbow] == -0.5
+
+
+def test_an_srdf_given_by_path_is_sent_as_the_one_beside_the_urdf(tmp_path):
+    """``hello_model(srdf=…)``: what `poise sim --srdf` sends; the server needs no new field."""
+    srdf = tmp_path / "lab.srdf"
+    srdf.write_text(
+        "<robot name='poise_biped'><group_state name='lab' group='all'>"
+        "<joint name='torso_yaw' value='0.25'/></group_state></robot>"
+    )
+    fields = hello_model(str(URDF), srdf=srdf)
+    assert fields["model_assets"]["poise_biped.srdf"] == srdf.read_bytes()
+    assert "../srdf/poise_biped.srdf" not in fields["model_assets"]  # the first one found wins
+    robot = load_robot_model(**fields, keyframe="lab")
+    torso = [joint.name for joint in robot.joints].index("torso_yaw")
+    assert robot.standing_joint_position[torso] == 0.25
+    assert robot.description.keyframes == ("lab",)
+    with pytest.raises(DescriptionError, match=r"an SRDF goes with a URDF, not scene\.xml"):
+        hello_model(str(MODELS / "vendor_humanoid" / "scene.xml"), srdf=srdf)
