@@ -96,6 +96,9 @@ ASSET_CHUNK_BYTES = 1024 * 1024
 each between other clients' requests, so a chunk costs them at most about a millisecond."""
 ASSET_MESSAGE_OVERHEAD_BYTES = 4096
 """Room left in the server's ``max_message_bytes`` for an ``asset`` message's other keys."""
+SMALLEST_MESSAGE_CAP_BYTES = 64 * 1024
+"""The smallest ``poise serve --max-message-bytes``: a larger request may be dropped unanswered
+(by ZeroMQ, beyond twice the cap), which a timeout's message then says."""
 ASSET_ROUNDS = 3
 """Uploads before a ``hello`` that still misses files gives up (another client's uploads
 may evict files of a cache too small for both)."""
@@ -288,6 +291,7 @@ class ControllerClient:
         self.uploaded_assets = 0
         """Files whose upload completed."""
         self._seq = 0
+        self._sent_bytes = 0
         self._pending_seq: int | None = None
         self._pending_state: State | None = None
         self._needs_reconnect = False
@@ -625,8 +629,10 @@ class ControllerClient:
         message = message.model_copy(update={"seq": self._seq})
         if self.recorder is not None and record:
             self.recorder.record(message, "sent")
+        data = encode(message)
+        self._sent_bytes = len(data)
         try:  # a DEALER with no connected peer (a refused CURVE handshake) blocks on send
-            self._open_socket().send(encode(message))
+            self._open_socket().send(data)
         except zmq.Again:
             self._timed_out(message.type, self.timeout_s)
         return self._seq
@@ -677,7 +683,13 @@ class ControllerClient:
         check = "is `poise serve` running there"
         if self.curve is not None:
             check += ", with the server key given, and does it accept this client's CURVE key"
+        size = ""
+        if self._sent_bytes > 2 * SMALLEST_MESSAGE_CAP_BYTES:
+            size = (
+                f" (The request was {self._sent_bytes} bytes: a server drops one over twice its "
+                "`poise serve --max-message-bytes` unanswered.)"
+            )
         raise ServerTimeout(
             f"nothing answers at {self.endpoint}: no reply to {request_type!r} within "
-            f"{timeout_s:.3g} s; {check}?"
+            f"{timeout_s:.3g} s; {check}?{size}"
         )

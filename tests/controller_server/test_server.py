@@ -1,12 +1,30 @@
 """A worker's request handling, without sockets: every bad input gets a typed error."""
 
+import hashlib
+import stat
+import time
+from pathlib import Path
+
 import msgpack
 import numpy as np
 import pytest
 
+from clients.sim.model_file import hello_model
+from controller_server.asset_cache import AssetCache, read_asset
 from controller_server.session_table import SessionTable
 from protocol import ErrorCode, decode, encode
-from protocol.messages import Bye, Command, Error, Hello, Params, SetParams, Stats, Welcome
+from protocol.messages import (
+    Asset,
+    Bye,
+    Command,
+    Error,
+    Hello,
+    Params,
+    SetParams,
+    Stats,
+    Welcome,
+)
+from protocol.recording import read_log
 from tests.helpers import random_state
 
 ALICE, BOB = b"alice", b"bob"
@@ -249,3 +267,84 @@ def test_real_ticks_read_by_the_fast_path_as_pydantic_reads_them(server, control
     assert isinstance(command, Command) and command.diagnostics is not None
     payload = msgpack.unpackb(encode(command))
     assert_same(reader(Command)(payload), Command.model_validate(payload))
+
+
+# ----------------------------------------------------------------- files by hash (issue 31)
+
+
+def _upload(cache, data, client="10.0.0.1", identity=b"peer"):
+    """One whole file in one chunk; the cache's reply."""
+    sha256 = hashlib.sha256(data).hexdigest()
+    return cache.receive(identity, client, Asset(sha256=sha256, size_bytes=len(data), data=data))
+
+
+def _bytes_on_disk(directory: Path) -> int:
+    return sum(path.stat().st_size for path in directory.rglob("*") if path.is_file())
+
+
+def test_the_asset_cache_stays_within_its_bytes_least_recently_used_out():
+    cache = AssetCache(
+        10_000, max_file_bytes=4000, max_upload_bytes_per_client=8000, idle_timeout_s=30.0
+    )
+    directory = cache.directory
+    try:
+        assert stat.S_IMODE(directory.stat().st_mode) == 0o700
+        files = [bytes([index]) * 3000 for index in range(10)]
+        hashes = [hashlib.sha256(data).hexdigest() for data in files]
+        for index, data in enumerate(files):
+            assert _upload(cache, data).complete
+            if index == 2:  # f0 used again: f1 is now the least recently used
+                assert cache.missing("10.0.0.1", [hashes[0]]) == []
+            assert cache.used_bytes <= 10_000
+            assert _bytes_on_disk(directory) <= 10_000
+        assert cache.missing("10.0.0.1", hashes) == sorted(hashes[:7])
+        assert read_asset(directory, hashes[9]) == files[9]
+        # An upload in progress holds its declared size; idle, it is dropped.
+        sha256 = hashlib.sha256(b"y" * 4000).hexdigest()
+        reply = cache.receive(b"peer", "10.0.0.1", Asset(sha256=sha256, size_bytes=4000, data=b"y"))
+        assert reply.received_bytes == 1 and not reply.complete
+        assert cache.used_bytes <= 10_000 and cache.missing("10.0.0.1", hashes[7:]) == [hashes[7]]
+        assert cache.expire(time.monotonic() + 31.0) == 1
+        assert not list((directory / "partial").iterdir())
+        # Another client has uploaded nothing: it sees nothing, and its upload is stored once.
+        assert cache.missing("10.0.0.2", [hashes[9]]) == [hashes[9]]
+        assert _upload(cache, files[9], client="10.0.0.2").complete
+        assert cache.missing("10.0.0.2", [hashes[9]]) == []
+        assert _bytes_on_disk(directory) == 2 * 3000
+    finally:
+        cache.close()
+    assert not directory.exists()
+
+
+def test_a_hello_by_hash_reads_the_cache_and_is_recorded_with_its_files_inline(tmp_path):
+    fields = hello_model(
+        str(Path(__file__).parents[1] / "models" / "vendor_humanoid" / "scene.xml")
+    )
+    files = fields.pop("model_assets")
+    hashes = {path: hashlib.sha256(data).hexdigest() for path, data in files.items()}
+    hello = Hello(seq=3, controller="tracking", model_asset_hashes=hashes, **fields)
+    cache = AssetCache(
+        10**6, max_file_bytes=10**6, max_upload_bytes_per_client=10**6, idle_timeout_s=30.0
+    )
+    try:
+        for table in (SessionTable(), SessionTable(asset_dir=cache.directory)):
+            reply = ask(table, ALICE, hello)
+            assert_error(reply, ErrorCode.ASSETS_MISSING, "model_asset_hashes", seq=3)
+            assert reply.missing_asset_hashes == sorted(set(hashes.values()))
+            assert reply.max_message_bytes == table.max_message_bytes
+        for data in files.values():
+            assert _upload(cache, data).complete
+        table = SessionTable(asset_dir=cache.directory, record_dir=tmp_path)
+        assert isinstance(ask(table, ALICE, hello), Welcome)
+        table.close()
+        (log,) = tmp_path.glob("*.mcap")
+        (logged,) = [m.message for m in read_log(log) if isinstance(m.message, Hello)]
+        assert logged.model_assets == files and logged.model_asset_hashes is None
+        # A file damaged on disk is missing, not wrong.
+        mesh = cache.directory / hashes["assets/foot.stl"]
+        mesh.write_bytes(b"\0" + mesh.read_bytes()[1:])
+        reply = ask(table, BOB, hello)
+        assert_error(reply, ErrorCode.ASSETS_MISSING, "model_asset_hashes")
+        assert reply.missing_asset_hashes == [hashes["assets/foot.stl"]]
+    finally:
+        cache.close()
