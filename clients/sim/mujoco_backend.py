@@ -8,7 +8,10 @@ simulated as the server controls it, the backend changes it and says so in
 :attr:`MujocoBackend.conversions`: position and velocity servos become
 torque motors with their force limits, a missing floor plane is added, a
 root without a free joint gets one, a URDF's joints get motors at their
-effort limits. It speaks the wire conventions of ``docs/protocol.md`` (see
+effort limits, the robot's body pairs that touch at the standing pose or a
+keyframe (and those its SRDF disables) do not collide, and a URDF's meshes
+reach MuJoCo in memory, one asset per file. Bodies outside the robot (a
+jointed prop in the scene) are left to MuJoCo. It speaks the wire conventions of ``docs/protocol.md`` (see
 :mod:`clients.sim.backend`). The conversions at the MuJoCo boundary, each
 checked against Pinocchio in ``tests/clients/test_mujoco_backend.py``:
 
@@ -62,7 +65,7 @@ they describe the reset state under zero torques.
 from __future__ import annotations
 
 import math
-import re
+import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from pathlib import Path, PurePosixPath
 
@@ -139,30 +142,92 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-def _mujoco_spec(path: Path) -> mujoco.MjSpec:
+def _mujoco_spec(path: Path) -> tuple[mujoco.MjSpec, list[str]]:
     """The file as MuJoCo reads it: MJCF with its includes and assets, or URDF.
 
     URDF is imported by MuJoCo's own importer, with its static links kept
     (``fusestatic="false"``: the root link would otherwise be fused into the
-    world) and meshes found by file name, as MuJoCo's importer looks them up.
+    world) and every mesh handed over in memory (:func:`_urdf_for_mujoco`).
+
+    Returns:
+        The spec, and what was changed on the way (notes for the run's log).
     """
     text, read = path.read_bytes(), local_reader(path)
     if model_format(path) == "mjcf":
-        return compile_mjcf(text, read)[0]
-    assets = {
-        PurePosixPath(name).name: data for name, data in gather_files(text, "urdf", read).items()
-    }
-    urdf = re.sub(
-        rb"(<robot\b[^>]*>)",
-        rb'\1<mujoco><compiler fusestatic="false" discardvisual="true"/></mujoco>',
-        text,
-        count=1,
-    )
+        return compile_mjcf(text, read)[0], []
+    urdf, assets, notes = _urdf_for_mujoco(text, gather_files(text, "urdf", read))
     try:
-        return mujoco.MjSpec.from_string(urdf.decode(), assets=assets)
+        return mujoco.MjSpec.from_string(urdf, assets=assets), notes
     except ValueError as exc:
         detail = " ".join(str(exc).split())
         raise DescriptionError(f"MuJoCo could not import the URDF: {detail}") from None
+
+
+def _urdf_for_mujoco(
+    text: bytes, files: dict[str, bytes]
+) -> tuple[str, dict[str, bytes], list[str]]:
+    """The URDF as MuJoCo's importer gets it: every mesh an in-memory asset of its own.
+
+    MuJoCo's importer names a mesh asset after its file's base name and opens
+    what it cannot find in the assets from the disk (``package://`` URIs
+    included, which it cannot read). So every ``<mesh filename>`` becomes a
+    key ``poise_asset_N.<ext>`` of the files read beside the model (one key
+    per distinct ``filename``: two meshes of the same base name in different
+    directories stay two meshes), a collision whose mesh could not be read is
+    dropped, and the document is written back by the XML library, so no name
+    from the file reaches MuJoCo unescaped. Visual elements are dropped (as
+    MuJoCo's ``discardvisual`` would: the backend simulates, it does not draw),
+    and the file's own ``<mujoco><compiler>`` loses its asset directories.
+
+    Args:
+        text: The URDF.
+        files: The files it names, by ``filename`` as written
+            (:func:`~controller_server.models.description.gather_files`).
+
+    Returns:
+        The URDF for MuJoCo, its assets by key, and a note if meshes were dropped.
+    """
+    robot = ET.fromstring(text)  # the description has parsed it already
+    assets: dict[str, bytes] = {}
+    keys: dict[str, str] = {}
+    dropped: list[str] = []
+    for link in robot.iter("link"):
+        for visual in link.findall("visual"):
+            link.remove(visual)
+        for collision in link.findall("collision"):
+            mesh = collision.find("geometry/mesh")
+            if mesh is None:
+                continue
+            filename = mesh.get("filename", "")
+            data = files.get(filename)
+            if data is None:
+                link.remove(collision)
+                dropped.append(f"{link.get('name', '')} ({filename})")
+                continue
+            if filename not in keys:
+                keys[filename] = f"poise_asset_{len(keys)}{PurePosixPath(filename).suffix.lower()}"
+                assets[keys[filename]] = data
+            mesh.set("filename", keys[filename])
+    for material in robot.iter("material"):
+        for texture in material.findall("texture"):
+            material.remove(texture)
+    options = robot.find("mujoco")
+    if options is None:
+        options = ET.Element("mujoco")
+        robot.insert(0, options)
+    compiler = options.find("compiler")
+    if compiler is None:
+        compiler = ET.SubElement(options, "compiler")
+    for directory in ("meshdir", "texturedir", "assetdir"):
+        compiler.attrib.pop(directory, None)
+    compiler.set("fusestatic", "false")
+    compiler.set("discardvisual", "true")
+    notes = (
+        [f"dropped {len(dropped)} collision mesh(es) that could not be read: " + ", ".join(dropped)]
+        if dropped
+        else []
+    )
+    return ET.tostring(robot, encoding="unicode"), assets, notes
 
 
 def _subtree_bodies(model: mujoco.MjModel, top: int) -> list[int]:
@@ -203,6 +268,7 @@ class MujocoBackend:
         contacts: list[ContactSpec] | None = None,
         keyframe: str | None = None,
         contact_time_constant_s: float | None = None,
+        srdf: str | Path | None = None,
     ):
         """Load the model and build the wire ↔ MuJoCo maps once.
 
@@ -214,11 +280,14 @@ class MujocoBackend:
             joint_names: Wire joint order (e.g. from ``welcome.joints``);
                 default: the server's (Pinocchio's) order.
             contacts: The feet, as in ``hello.contacts`` (default: found as the server finds them).
-            keyframe: MJCF keyframe of the standing pose (the contacts are found in it).
+            keyframe: Keyframe of the standing pose (MJCF ``<key>``, a URDF's SRDF
+                ``group_state``); the contacts are found in it.
             contact_time_constant_s: Time constant of every contact with the floor (the
                 first number of MuJoCo's ``solref``, damping ratio 1); ``None`` keeps the
                 model's (MuJoCo's default 0.02 s: the thesis humanoid standing sinks 1.1 mm
                 into the floor, at 0.005 s 0.15 mm). At least two steps.
+            srdf: A URDF's SRDF (keyframes, disabled collision pairs), instead of the one
+                beside it.
 
         Raises:
             ValueError: A non-positive or non-finite coefficient or step, or a contact
@@ -242,6 +311,7 @@ class MujocoBackend:
                 "MuJoCo's soft contacts are unstable below"
             )
         self.contact_time_constant_s = contact_time_constant_s
+        self._srdf = srdf
         self.model_path = resolve_model_path(model)
         self.friction_coefficient = float(friction_coefficient)
         self.timestep_s = float(timestep_s)
@@ -250,11 +320,13 @@ class MujocoBackend:
         self._step_count = 0
 
         try:
-            self.description = describe_model(model, contacts=contacts, keyframe=keyframe)
-            spec = _mujoco_spec(self.model_path)
+            self.description = describe_model(
+                model, contacts=contacts, keyframe=keyframe, srdf=srdf
+            )
+            spec, notes = _mujoco_spec(self.model_path)
         except DescriptionError as exc:
             raise self._fail(str(exc)) from None
-        self.conversions: list[str] = []
+        self.conversions: list[str] = list(notes)
         """What was changed so MuJoCo simulates what the server controls (for the run's log)."""
         self._configure(spec)
         # Edits go through MjSpec so that compiled, derived fields (static
@@ -265,9 +337,10 @@ class MujocoBackend:
         self._map_joints(
             list(joint_names) if joint_names is not None else self.description.joint_names
         )
+        self._exclude_self_collisions(spec)
         self._map_actuators()
         self._map_contacts()
-        self.total_mass_kg = float(self._model.body_mass[1:].sum())
+        self.total_mass_kg = float(self._model.body_mass[self._robot_bodies].sum())
         self._body_ids: dict[str, int] = {}
         self._pushed_bodies: list[int] = []
         self._flags = [False] * len(self.contact_names)
@@ -282,6 +355,7 @@ class MujocoBackend:
         return UnsupportedModel(f"{self.model_path}: {detail}")
 
     def _map_base(self) -> None:
+        """The robot's free joint and bodies; the bodies outside it, left to MuJoCo, noted."""
         model = self._model
         root = model.body(self.description.bodies[0].name).id
         free = [j for j in range(model.njnt) if model.jnt_type[j] == _FREE]
@@ -289,17 +363,51 @@ class MujocoBackend:
         self._base_joint = free[0]
         self._base_qpos = int(model.jnt_qposadr[free[0]])
         self._base_dof = int(model.jnt_dofadr[free[0]])
+        self._robot_bodies = _subtree_bodies(model, root)
+        robot = set(self._robot_bodies)
+        self._robot_joints = [j for j in range(model.njnt) if int(model.jnt_bodyid[j]) in robot]
+        outside: dict[int, list[str]] = {}
+        for joint in range(model.njnt):
+            body = int(model.jnt_bodyid[joint])
+            if body not in robot:
+                outside.setdefault(body, []).append(model.joint(joint).name or f"#{joint}")
+        if outside:
+            listed = ", ".join(
+                f"{model.body(body).name or f'body #{body}'} "
+                f"(joint{'s' if len(joints) > 1 else ''} {', '.join(joints)})"
+                for body, joints in outside.items()
+            )
+            count = f"{len(outside)} bod{'ies' if len(outside) > 1 else 'y'}"
+            self.conversions.append(f"left {count} outside the robot to the simulator: {listed}")
 
     def _map_joints(self, names: list[str]) -> None:
+        """Wire DoF → ``qpos`` / ``qvel`` addresses, by the names of the robot's joints.
+
+        Only the robot's joints (its root's subtree) are compared with the wire:
+        the joints of other bodies in the scene are MuJoCo's alone.
+        """
         model = self._model
         qpos_index: list[int] = []
         dof_index: list[int] = []
         mujoco_names = [
-            model.joint(j).name for j in range(model.njnt) if model.jnt_type[j] != _FREE
+            model.joint(j).name for j in self._robot_joints if model.jnt_type[j] != _FREE
         ]
         if sorted(names) != sorted(mujoco_names):
+            missing = [name for name in names if name not in mujoco_names]
+            extra = [name for name in mujoco_names if name not in names]
+            twice = sorted({name for name in names if names.count(name) > 1})
+            detail = "; ".join(
+                f"{what}: {', '.join(found)}"
+                for what, found in (
+                    ("on the wire, not in the robot", missing),
+                    ("in the robot, not on the wire", extra),
+                    ("twice on the wire", twice),
+                )
+                if found
+            )
             raise self._fail(
-                f"wire joints {names} are not the model's non-free joints {mujoco_names}"
+                f"the wire's joints are not the robot's ({detail}); "
+                "run the server and the simulator on the same robot file"
             )
         for joint_name in names:
             joint = model.joint(joint_name).id
@@ -321,16 +429,104 @@ class MujocoBackend:
             int(model.jnt_qposadr[j]) for j in range(model.njnt) if model.jnt_type[j] == _BALL
         ]
 
+    def _exclude_self_collisions(self, spec: mujoco.MjSpec) -> None:
+        """Exclude the robot's body pairs that touch at the standing pose or a keyframe.
+
+        MuJoCo excludes only parent–child pairs, so links a vendor drew
+        overlapping (hip links across the pelvis, a hand in a thigh) push each
+        other apart from the first step, and the robot fights itself. Each pair
+        is noted with its depth and the pose it touched in; the model is
+        recompiled (bodies, joints and addresses do not change).
+        """
+        model, data = self._model, self._data
+        robot = np.zeros(model.nbody, dtype=bool)
+        robot[self._robot_bodies] = True
+        touching: dict[tuple[int, int], tuple[float, str]] = {}
+        for pose, configuration in self._poses():
+            data.qpos[:] = self._qpos(configuration)
+            mujoco.mj_forward(model, data)
+            contacts = data.contact
+            for geoms, distance_m in zip(
+                contacts.geom.tolist(), contacts.dist.tolist(), strict=True
+            ):
+                first, second = sorted(int(model.geom_bodyid[g]) for g in geoms)
+                if not (robot[first] and robot[second]):
+                    continue
+                depth_m = max(0.0, -distance_m)
+                if (first, second) not in touching or depth_m > touching[first, second][0]:
+                    touching[first, second] = (depth_m, pose)
+        mujoco.mj_resetData(model, data)
+        if not touching:
+            return
+        names = self._body_names(spec)
+        for (first, second), (depth_m, pose) in sorted(touching.items()):
+            spec.add_exclude(bodyname1=names[first], bodyname2=names[second])
+            self.conversions.append(
+                f"excluded the self-collision {names[first]} – {names[second]}: "
+                f"{1000 * depth_m:.1f} mm deep at {pose}"
+            )
+        self._model = spec.compile()
+        self._data = mujoco.MjData(self._model)
+
+    def _poses(self) -> list[tuple[str, np.ndarray]]:
+        """The standing pose and every keyframe the description knows (Pinocchio ``q``)."""
+        poses = [("the standing pose", self.description.standing_configuration)]
+        feet = [
+            ContactSpec(name=c.name, frame=c.frame, points_in_frame=c.points_in_frame.tolist())
+            for c in self.description.contacts
+        ]
+        for name in self.description.keyframes:
+            if name == self.description.keyframe:
+                continue
+            try:
+                keyframe = describe_model(
+                    str(self.model_path), contacts=feet, keyframe=name, srdf=self._srdf
+                )
+            except DescriptionError as exc:
+                self.conversions.append(f"keyframe {name!r} not checked for self-collision: {exc}")
+                continue
+            poses.append((f"keyframe {name!r}", keyframe.standing_configuration))
+        return poses
+
+    def _qpos(self, configuration: np.ndarray) -> np.ndarray:
+        """MuJoCo ``qpos`` of a Pinocchio ``q`` of the description (others at ``qpos0``)."""
+        model, pinocchio = self._model, self.description.model
+        qpos = model.qpos0.copy()
+        base = self._base_qpos
+        qpos[base : base + 3] = configuration[:3]
+        x, y, z, w = configuration[3:7]
+        qpos[base + 3 : base + 7] = (w, x, y, z)
+        for joint in range(2, pinocchio.njoints):
+            start, count = pinocchio.joints[joint].idx_q, pinocchio.joints[joint].nq
+            address = int(model.jnt_qposadr[model.joint(pinocchio.names[joint]).id])
+            value = configuration[start : start + count]
+            qpos[address : address + count] = (value[3], *value[:3]) if count == 4 else value
+        return qpos
+
+    def _body_names(self, spec: mujoco.MjSpec) -> list[str]:
+        """Every body's name, an unnamed one named now (an exclusion names its bodies)."""
+        names = [self._model.body(b).name for b in range(self._model.nbody)]
+        taken = set(names)
+        for body, name in enumerate(names):
+            if not name:
+                fresh = f"unnamed_body_{body}"
+                while fresh in taken:
+                    fresh += "_"
+                spec.bodies[body].name = names[body] = fresh
+                taken.add(fresh)
+        return names
+
     def _map_actuators(self) -> None:
         """For each wire DoF, the motor on that joint whose gear is non-zero only there."""
         model = self._model
+        robot_joints = set(self._robot_joints)
         dof_to_actuator: dict[int, tuple[int, float]] = {}
         for actuator in range(model.nu):
             if model.actuator_trntype[actuator] != _TRANSMISSION_JOINT:
                 continue
             joint = int(model.actuator_trnid[actuator, 0])
-            if joint == self._base_joint:
-                continue
+            if joint == self._base_joint or joint not in robot_joints:
+                continue  # the free base, or a body outside the robot (MuJoCo's)
             gear = model.actuator_gear[actuator]
             nonzero = np.flatnonzero(gear)
             if len(nonzero) != 1 or (model.jnt_type[joint] != _BALL and nonzero[0] != 0):
@@ -383,6 +579,8 @@ class MujocoBackend:
             self._geom_contact[np.isin(model.geom_bodyid, _subtree_bodies(model, body))] = contact
         self._geom_is_ground = model.geom_bodyid == _WORLD_BODY
         self._ground_list: list[bool] = self._geom_is_ground.tolist()
+        # A body outside the robot (a prop, a dummy) on the floor is not the robot falling.
+        self._robot_list: list[bool] = np.isin(model.geom_bodyid, self._robot_bodies).tolist()
         self._contact_of_geom: list[int] = self._geom_contact.tolist()
 
     def _reference_points(self) -> np.ndarray:
@@ -431,6 +629,20 @@ class MujocoBackend:
                 )
             for geom in body.find_all(mujoco.mjtObj.mjOBJ_GEOM) + list(body.geoms):
                 geom.friction[0] = self.friction_coefficient
+        self._exclude_disabled_pairs(spec)
+
+    def _exclude_disabled_pairs(self, spec: mujoco.MjSpec) -> None:
+        """Exclude the body pairs the robot's SRDF disables (``disable_collisions``)."""
+        pairs = self.description.disabled_collision_pairs
+        present = [p for p in pairs if spec.body(p[0]) is not None and spec.body(p[1]) is not None]
+        for first, second in present:
+            spec.add_exclude(bodyname1=first, bodyname2=second)
+        if pairs:
+            absent = len(pairs) - len(present)
+            self.conversions.append(
+                f"excluded {len(present)} pair{'' if len(present) == 1 else 's'} the SRDF disables"
+                + (f" ({absent} name a link this model lacks)" if absent else "")
+            )
 
     def _convert_actuators(self, spec: mujoco.MjSpec) -> None:
         """Position and velocity servos become torque motors, force limits kept.
@@ -638,7 +850,7 @@ class MujocoBackend:
         return body
 
     def _ground_contacts(self) -> list[tuple[int, int, bool]]:
-        """Active contacts between the ground and a robot geom.
+        """Active contacts between the ground and a robot geom (not another body's).
 
         Returns:
             Per contact: its index in ``data.contact``, the robot geom, and
@@ -646,13 +858,17 @@ class MujocoBackend:
             step has a handful of contacts, too few for numpy to pay off.)
         """
         contacts = self._data.contact
-        is_ground = self._ground_list
+        is_ground, is_robot = self._ground_list, self._robot_list
         found = []
         for index, ((geom1, geom2), address) in enumerate(
             zip(contacts.geom.tolist(), contacts.efc_address.tolist(), strict=True)
         ):
-            if address >= 0 and is_ground[geom1] != is_ground[geom2]:
-                found.append((index, geom2, True) if is_ground[geom1] else (index, geom1, False))
+            if address < 0:
+                continue
+            if is_ground[geom1] and is_robot[geom2]:
+                found.append((index, geom2, True))
+            elif is_ground[geom2] and is_robot[geom1]:
+                found.append((index, geom1, False))
         return found
 
     def _update_contact_flags(self) -> None:
