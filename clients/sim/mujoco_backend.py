@@ -11,8 +11,9 @@ root without a free joint gets one, a URDF's joints get motors at their
 effort limits, the robot's body pairs that touch at the standing pose or a
 keyframe (and those its SRDF disables) do not collide, and a URDF's meshes
 reach MuJoCo in memory, one asset per file. Bodies outside the robot (a
-jointed prop in the scene) are left to MuJoCo. It speaks the wire conventions of ``docs/protocol.md`` (see
-:mod:`clients.sim.backend`). The conversions at the MuJoCo boundary, each
+jointed prop in the scene) are left to MuJoCo. It speaks the wire
+conventions of ``docs/protocol.md`` (see :mod:`clients.sim.backend`).
+The conversions at the MuJoCo boundary, each
 checked against Pinocchio in ``tests/clients/test_mujoco_backend.py``:
 
 * **Free joint.** ``qpos = [position in world, quaternion w x y z]``;
