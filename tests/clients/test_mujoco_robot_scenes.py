@@ -180,6 +180,7 @@ def test_without_the_exclusions_the_overlapping_robot_fights_itself_and_falls(se
     scenario = load_scenario("stand", model=str(OVERLAP_URDF), backend="mujoco", duration_s=3.0)
     record = run_scenario(scenario, server.endpoint)
     assert record.fell, "the overlapping robot stood without the exclusions"
+    assert not record.fall_reason.startswith("controller error"), record.fall_reason
 
 
 SRDF = """<?xml version="1.0"?>
