@@ -1,7 +1,8 @@
 """Replay a recorded conversation against a server: a log is a regression test.
 
 The log's own ``hello`` re-creates the session (the server must announce the
-recorded model hash), its ``set_params`` and ``state`` requests are sent in
+recorded model hash; the files it holds inline go by hash, uploaded to a server
+that lacks them, see :mod:`clients.client`), its ``set_params`` and ``state`` requests are sent in
 recorded order, and every returned command is compared with the recorded
 one, field by field: ``|new − old| ≤ atol + rtol·|old|`` (NaN equal to NaN).
 The same code reproduces a log within 1e-9; a behaviour change shows as the

@@ -6,6 +6,7 @@ committed file differs from what this prints, so the table cannot rot.
 
 from __future__ import annotations
 
+import inspect
 import types
 import typing
 from typing import Any, Literal
@@ -91,10 +92,12 @@ missing file with `asset` messages (chunks in order, each within
 `hello`. The server checks each file's SHA-256 once it is complete and keeps
 it in a cache shared by its workers (`--asset-cache-bytes`, least recently
 used out), so the next `hello` of that client (a reconnect, the next run)
-uploads nothing. A client sees only the files it uploaded itself (another
-client cannot learn which files the server holds). `ControllerClient` sends
-every file this way; a log records the `hello` with its files inline, so it
-replays on any server.
+uploads nothing. A client (a CURVE key, or without CURVE a peer address, as
+for sessions) may name only files it uploaded itself, so no client learns
+which files another sent; the bytes are stored once. `ControllerClient` sends
+every file this way; its logs and the server's (`poise serve --record`) hold
+the `hello` with its files inline, so a log replays on any server. A request
+over twice `--max-message-bytes` is dropped by ZeroMQ unanswered.
 
 Versioning: an addition that leaves every message of this version valid (a
 new optional key, message type or error code) keeps the version number; a
@@ -149,7 +152,7 @@ def render_protocol_doc() -> str:
     """The full text of ``docs/protocol.md``."""
     sections = [INTRO]
     for kind, cls in MESSAGE_TYPES.items():
-        sections.append(f"## `{kind}`\n\n{(cls.__doc__ or '').strip()}\n\n{_table(cls)}\n")
+        sections.append(f"## `{kind}`\n\n{inspect.cleandoc(cls.__doc__ or '')}\n\n{_table(cls)}\n")
     for part in (
         ContactSpec,
         JointInfo,
@@ -161,7 +164,9 @@ def render_protocol_doc() -> str:
         BaseEstimateDiagnostics,
         SessionStats,
     ):
-        sections.append(f"## {part.__name__}\n\n{(part.__doc__ or '').strip()}\n\n{_table(part)}\n")
+        sections.append(
+            f"## {part.__name__}\n\n{inspect.cleandoc(part.__doc__ or '')}\n\n{_table(part)}\n"
+        )
     errors = ["| code | name | meaning |", "|---|---|---|"]
     errors += [f"| {int(c)} | `{c.name}` | {c.description} |" for c in ErrorCode]
     sections.append("## Error codes\n\n" + "\n".join(errors) + "\n")

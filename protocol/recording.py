@@ -2,7 +2,8 @@
 
 A log is an `MCAP <https://mcap.dev>`_ file with one channel per message
 type (topic = the ``type``: ``hello``, ``welcome``, ``state``, ``command``,
-``set_params``, ``params``, ``stats``, ``bye``, ``error``). Each channel has a
+``set_params``, ``params``, ``stats``, ``asset``, ``asset_received``, ``bye``,
+``error``). Each channel has a
 JSON Schema (schema encoding ``jsonschema``) and its messages are JSON
 (message encoding ``json``), so Foxglove opens the file as it is. A logged
 message is the protocol message as a JSON object plus one envelope key:
@@ -11,6 +12,11 @@ message is the protocol message as a JSON object plus one envelope key:
 - Numeric arrays are JSON lists of numbers. JSON has no NaN or infinity:
   every non-finite number (in an array or a scalar) is written as ``null``
   and reads back as NaN (a ``float | None`` field reads back as ``None``).
+
+The recorders of Poise (the client's, the server's) write a ``hello`` with the
+files of its model inline (``model_assets``), whether they travelled inline or
+by hash (``model_asset_hashes`` and ``asset`` uploads, which are not recorded):
+a log replays on a server that never saw them.
 
 The MCAP log time (and publish time) of a message is the time of the event in
 nanoseconds since the Unix epoch; the MCAP ``sequence`` counts the messages

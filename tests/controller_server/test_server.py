@@ -8,11 +8,13 @@ from pathlib import Path
 import msgpack
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from clients.sim.model_file import hello_model
 from controller_server.asset_cache import AssetCache, read_asset
 from controller_server.session_table import SessionTable
-from protocol import ErrorCode, decode, encode
+from protocol import ErrorCode, ProtocolError, decode, encode
 from protocol.messages import (
     Asset,
     Bye,
@@ -346,5 +348,58 @@ def test_a_hello_by_hash_reads_the_cache_and_is_recorded_with_its_files_inline(t
         reply = ask(table, BOB, hello)
         assert_error(reply, ErrorCode.ASSETS_MISSING, "model_asset_hashes")
         assert reply.missing_asset_hashes == [hashes["assets/foot.stl"]]
+    finally:
+        cache.close()
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from(["10.0.0.1", "10.0.0.2"]),
+            st.binary(max_size=5000),
+            st.integers(1, 3),
+            st.booleans(),
+        ),
+        max_size=12,
+    )
+)
+def test_the_asset_cache_keeps_its_bounds_whatever_is_uploaded(uploads):
+    """Uploads in 1–3 chunks, some left unfinished, from two clients: within the bounds,
+    every file a client may name is there with its content, every refusal a typed error."""
+    cache = AssetCache(
+        8000, max_file_bytes=4000, max_upload_bytes_per_client=6000, idle_timeout_s=30.0
+    )
+    stored: dict[str, bytes] = {}
+    try:
+        for index, (client, data, chunks, finish) in enumerate(uploads):
+            sha256 = hashlib.sha256(data).hexdigest()
+            step = max(1, -(-len(data) // chunks))
+            offsets = list(range(0, len(data), step)) or [0]
+            for offset in offsets if finish else offsets[:1]:
+                chunk = Asset(
+                    sha256=sha256,
+                    size_bytes=len(data),
+                    offset_bytes=offset,
+                    data=data[offset : offset + step],
+                )
+                try:
+                    reply = cache.receive(bytes([index]), client, chunk)
+                except ProtocolError as exc:
+                    assert exc.code == ErrorCode.LIMIT_EXCEEDED and exc.field == "size_bytes"
+                    assert (
+                        len(data) > 4000
+                        or "--asset-cache-bytes" in exc.detail
+                        or ("--max-upload-bytes-per-client" in exc.detail)
+                    )
+                    break
+                if reply.complete:
+                    stored[sha256] = data
+                    break
+            assert cache.used_bytes <= 8000
+            assert _bytes_on_disk(cache.directory) <= 8000
+        for client in ("10.0.0.1", "10.0.0.2"):
+            for sha256 in set(stored) - set(cache.missing(client, stored)):
+                assert read_asset(cache.directory, sha256) == stored[sha256]
     finally:
         cache.close()

@@ -1,3 +1,5 @@
+import hashlib
+
 import msgpack
 import numpy as np
 import pytest
@@ -68,6 +70,23 @@ def test_golden_bytes_of_an_asset_chunk_and_its_reply():
     )
     assert encode(reply) == expected
     assert decode(expected) == reply
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.binary(max_size=4096),
+    st.integers(0, 2**40),
+    st.integers(0, 2**40),
+    st.integers(0, 2**63 - 1),
+)
+def test_any_asset_chunk_round_trips_exactly(data, size, offset, seq):
+    sha256 = hashlib.sha256(data).hexdigest()
+    chunk = Asset(seq=seq, sha256=sha256, size_bytes=size, offset_bytes=offset, data=data)
+    assert decode(encode(chunk)) == chunk
+    payload = msgpack.unpackb(encode(chunk))
+    assert payload["data"] == data and isinstance(payload["data"], bytes)  # msgpack bin
+    reply = AssetReceived(seq=seq, sha256=sha256, received_bytes=offset, complete=bool(size % 2))
+    assert decode(encode(reply)) == reply
 
 
 def _hello_by_hash(**changes):
