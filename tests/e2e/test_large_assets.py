@@ -15,6 +15,7 @@ from __future__ import annotations
 import hashlib
 import re
 import shutil
+import stat
 import struct
 from pathlib import Path
 
@@ -382,3 +383,16 @@ def test_a_hello_by_hash_is_validated_before_its_files_are_looked_up(capped_serv
         assert reply.code == ErrorCode.INVALID_FIELD and reply.seq == 3, reply
         assert reply.field == "model_asset_hashes.mesh.stl"
         assert decode(encode(reply)) == reply
+
+
+def test_the_cache_is_a_private_directory_removed_when_the_server_stops(monkeypatch, tmp_path):
+    monkeypatch.setenv("TMPDIR", str(tmp_path))  # the server's temporary directories go here
+    content = b"solid mesh\n" * 1000
+    sha256 = hashlib.sha256(content).hexdigest()
+    with ServerProcess(extra_args=["--workers", "1"]) as server, Peer(server.endpoint) as peer:
+        assert peer.ask(_chunk(sha256, len(content), 0, content)).complete
+        (directory,) = tmp_path.glob("poise-assets-*")
+        assert stat.S_IMODE(directory.stat().st_mode) == 0o700
+        assert (directory / sha256).read_bytes() == content
+    assert server.process.returncode == 0
+    assert not list(tmp_path.glob("poise-assets-*"))
