@@ -136,8 +136,16 @@ class _Gather:
     sessions: list[SessionStats] = dataclasses.field(default_factory=list)
 
 
-def _error(seq: int, code: ErrorCode, field: str, detail: str) -> Error:
-    return Error(seq=max(seq, -1), code=code, field=field, detail=detail)
+def _error(
+    seq: int, code: ErrorCode, field: str, detail: str, max_message_bytes: int | None = None
+) -> Error:
+    return Error(
+        seq=max(seq, -1),
+        code=code,
+        field=field,
+        detail=detail,
+        max_message_bytes=max_message_bytes,
+    )
 
 
 def _error_of(exc: ProtocolError, max_message_bytes: int) -> Error:
@@ -395,7 +403,8 @@ class ControllerServer:
                     "",
                     f"message of {len(payload)} bytes exceeds the server's limit of "
                     f"{self.config.max_message_bytes} (`poise serve --max-message-bytes`)",
-                ).model_copy(update={"max_message_bytes": self.config.max_message_bytes}),
+                    max_message_bytes=self.config.max_message_bytes,
+                ),
             )
             return
         self._route(identity, client, payload)

@@ -67,10 +67,13 @@ def sphere_stl(path: Path, rings: int = 150, segments: int = 200, radius_m: floa
     path.write_bytes(b"\0" * 80 + struct.pack("<I", len(triangles)) + records.tobytes())
 
 
-def large_robot(directory: Path) -> Path:
-    """``tests/models/vendor_humanoid`` with a dense visual mesh on the pelvis; its scene."""
+def large_robot(directory: Path, radius_m: float = 0.05) -> Path:
+    """``tests/models/vendor_humanoid`` with a dense visual mesh on the pelvis; its scene.
+
+    Robots of different ``radius_m`` share no file but the foot's.
+    """
     shutil.copytree(MODELS / "vendor_humanoid", directory)
-    sphere_stl(directory / "assets" / "pelvis_detail.stl")
+    sphere_stl(directory / "assets" / "pelvis_detail.stl", radius_m=radius_m)
     robot = (directory / "robot.xml").read_text()
     mesh = '<mesh name="foot" file="foot.stl"/>'
     geom = '<geom class="visual" type="box" size="0.08 0.14 0.07"/>'
@@ -79,7 +82,7 @@ def large_robot(directory: Path) -> Path:
         mesh, f'{mesh}\n    <mesh name="pelvis_detail" file="pelvis_detail.stl"/>'
     )
     robot = robot.replace(geom, f'{geom}\n      <geom class="visual" mesh="pelvis_detail"/>', 1)
-    (directory / "robot.xml").write_text(robot)
+    (directory / "robot.xml").write_text(f"{robot}<!-- {radius_m} -->\n")
     return directory / "scene.xml"
 
 
@@ -154,13 +157,16 @@ def test_a_robot_whose_mesh_exceeds_the_message_cap_is_simulated_and_sent_once(
 
 def test_a_client_uploads_only_what_the_server_lacks(capped_server, tmp_path):
     """One file changed: only it is sent. A chunk over the cap is refused at the door."""
-    scene = large_robot(tmp_path / "robot")
+    scene = large_robot(tmp_path / "robot", radius_m=0.051)
     foot = scene.parent / "assets" / "foot.stl"
-    foot.write_bytes(b"changed" + foot.read_bytes()[7:])  # its free header: new content
-    fields = hello_model(str(scene))
-    with ControllerClient(capped_server.endpoint, timeout_s=30.0) as client:
-        client.connect(**fields, controller="tracking")
-        assert client.uploaded_assets == 1  # the foot; the rest is cached
+    for header in (b"first", b"second"):  # the STL's free header: new content each time
+        foot.write_bytes(header.ljust(80) + foot.read_bytes()[80:])
+        fields = hello_model(str(scene))
+        with ControllerClient(capped_server.endpoint, timeout_s=30.0) as client:
+            client.connect(**fields, controller="tracking")
+        if header == b"first":
+            continue  # it may have uploaded the others too (this test may run first)
+        assert client.uploaded_assets == 1  # the foot
         assert client.uploaded_asset_bytes == len(fields["model_assets"]["assets/foot.stl"])
     # A chunk larger than the cap is refused at the door, as any message would be.
     big = Asset(sha256="0" * 64, size_bytes=1_500_000, data=bytes(1_500_000))
@@ -333,7 +339,7 @@ def test_uploads_out_of_order_corrupt_too_long_or_beyond_a_bound_get_typed_error
 
 
 def test_a_log_of_files_sent_by_hash_replays_on_a_server_that_never_saw_them(
-    capped_server, large_robot_scene, tmp_path
+    large_robot_scene, tmp_path
 ):
     """Client and server logs hold the hello with its files inline: self-contained."""
     server_logs = tmp_path / "server_logs"
