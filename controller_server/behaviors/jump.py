@@ -72,7 +72,7 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.behaviors.observation import Observation
-from controller_server.controllers.base import ParamSpec
+from controller_server.params import ParamSpec
 
 __all__ = ["JUMP_PARAMETERS", "JUMP_STATES", "StandingJump"]
 

@@ -82,8 +82,8 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.behaviors.observation import Observation
-from controller_server.controllers.base import ParamSpec
 from controller_server.features.swing_foot import SwingTarget
+from controller_server.params import ParamSpec
 
 __all__ = ["WALK_PARAMETERS", "WALK_STATES", "Walk"]
 

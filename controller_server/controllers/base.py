@@ -21,6 +21,7 @@ import pinocchio as pin
 from controller_server.dynamics import DynamicsTerms
 from controller_server.errors import ControllerFailed, InvalidParams
 from controller_server.models import RobotModel
+from controller_server.params import ParamSpec
 
 __all__ = [
     "CONTACT_PARAMETERS",
@@ -97,27 +98,6 @@ def normalized_configuration_part(
     if any(np.linalg.norm(q[s : s + 4]) < 1e-9 for s in starts):
         raise InvalidParams(field, "quaternions must be non-zero")
     return pin.normalize(robot.model, q)[part]
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """A run-time parameter: its default, kind and allowed range.
-
-    Attributes:
-        default: Value when not set (``None`` for vectors derived from the model).
-        kind: ``"float"``, ``"int"``, ``"bool"``, ``"vector"``, ``"choice"`` or ``"text"``.
-        minimum: Smallest allowed value (floats, vector entries).
-        maximum: Largest allowed value.
-        choices: Allowed strings for ``"choice"``.
-        doc: One line for docs and error messages, with the unit.
-    """
-
-    default: Any
-    kind: str = "float"
-    minimum: float = -math.inf
-    maximum: float = math.inf
-    choices: tuple[str, ...] = ()
-    doc: str = ""
 
 
 CONTACT_PARAMETERS: dict[str, ParamSpec] = {

@@ -161,7 +161,8 @@ class MomentumController(Controller):
             0.02,
             minimum=0.0,
             maximum=1.0,
-            doc="L̇_des is limited so its COP stays this far inside the support polygon (m)",
+            doc="L̇_des is limited so its COP stays this far inside the support polygon (m; "
+            "at most a quarter of the polygon's width)",
         ),
         "angular_momentum_gain": ParamSpec(
             3000.0,

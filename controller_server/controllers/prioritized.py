@@ -205,7 +205,7 @@ class PrioritizedController(Controller):
             minimum=0.0,
             maximum=1.0,
             doc="`com` asks at most the CM acceleration whose COP stays this far inside "
-            "the support polygon (m)",
+            "the support polygon (m; at most a quarter of the polygon's width)",
         ),
         "com_height": ParamSpec(
             None,
