@@ -8,7 +8,9 @@ from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
 import zmq  # noqa: E402
+from hypothesis import settings  # noqa: E402
 
+from clients.pool import BATCH_DEADLINE_S  # noqa: E402
 from clients.server_process import ServerProcess  # noqa: E402
 from controller_server import files  # noqa: E402
 from tests.worktree import changes, tree_status  # noqa: E402
@@ -32,6 +34,11 @@ def _close_without_term(context: zmq.Context) -> None:
 
 
 zmq.Context.__del__ = _close_without_term  # type: ignore[method-assign]
+
+settings.register_profile("default", max_examples=100)
+settings.register_profile("nightly", max_examples=1000)
+"""``pytest --hypothesis-profile nightly``: every property and fuzz test at its full count
+(:func:`tests.helpers.examples`), ten times what every run draws."""
 _TREE_AT_START = pytest.StashKey[frozenset[str] | None]()
 
 
@@ -59,8 +66,14 @@ def pytest_sessionfinish(session, exitstatus):
 
 @pytest.fixture(scope="module")
 def server():
-    """A real `poise serve` process on a free loopback port, stopped after the module."""
-    with ServerProcess() as process:
+    """A real `poise serve` process on a free loopback port, stopped after the module.
+
+    Its deadline is a batch's (``BATCH_DEADLINE_S``, as ``poise sim`` gives its own server):
+    the tests run simulations in lockstep, where a tick answered late on a busy machine
+    costs the robot nothing, but under the 0.5 s default it would be a ``DEADLINE_EXCEEDED``
+    that a run reads as a fall. Tests of the deadline start servers of their own.
+    """
+    with ServerProcess(extra_args=["--deadline", f"{BATCH_DEADLINE_S:g}"]) as process:
         yield process
 
 

@@ -9,10 +9,19 @@ from pathlib import Path
 import av
 import numpy as np
 import pinocchio as pin
+from hypothesis import settings
 from scipy.spatial.transform import Rotation
 
 from clients.sampling import random_state  # noqa: F401  (re-exported for tests)
 from protocol.messages import Command, State, Welcome
+
+
+def examples(nightly: int) -> int:
+    """How many examples a large property or fuzz test draws: ``nightly`` under
+    ``--hypothesis-profile nightly`` (1000 examples by default), a tenth (at least 20) in
+    every other run, so that the tiers stay fast and the full counts stay one flag away.
+    """
+    return max(min(nightly, 20), nightly * settings.default.max_examples // 1000)
 
 
 class IndependentDynamics:

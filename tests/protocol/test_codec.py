@@ -17,10 +17,13 @@ from protocol import (
 )
 from protocol.errors import PoiseError
 from protocol.messages import Asset, AssetReceived, Bye, Hello, State
+from tests.helpers import examples
 from tests.protocol.samples import FILE_SHA256, sample_messages
 from tests.protocol.strategies import malformed_maps, msgpack_values
 
-FUZZ = settings(max_examples=4000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=examples(4000), deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
 
 
 def _equal(a, b):

@@ -9,10 +9,13 @@ from hypothesis import strategies as st
 from protocol import MESSAGE_TYPES, encode
 from protocol.fastpath import Fallback, reader
 from protocol.messages import Bye, Command, Error, State, Stats
+from tests.helpers import examples
 from tests.protocol.samples import sample_messages
 from tests.protocol.strategies import msgpack_values
 
-FUZZ = settings(max_examples=3000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=examples(3000), deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
 FAST = [m for m in sample_messages() if reader(type(m)) is not None]
 
 
