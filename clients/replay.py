@@ -218,7 +218,7 @@ def replay_log(
         raise ReplayError(
             f"{str(path)!r} was recorded with protocol version {hello.version}; this Poise "
             f"speaks version {PROTOCOL_VERSION}: replay it with the Poise that recorded it, "
-            'or re-record it (README, "When replay fails")'
+            'or re-record it (docs/recording.md, "When replay fails")'
         )
     report = ReplayReport(messages_read=reader.messages_read, log_truncated=reader.truncated)
     with contextlib.ExitStack() as stack:

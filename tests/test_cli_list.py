@@ -70,3 +70,29 @@ def test_list_through_the_command_line():
         [sys.executable, "-m", "controller_server.cli", "list", "models"], text=True, timeout=60
     )
     assert output.splitlines() == sorted(BUILTIN_MODELS)
+
+
+def test_no_category_lists_every_category(capsys):
+    lines = listed(capsys)
+    headings = [line for line in lines if not line.startswith("  ")]
+    assert [heading.split()[0] for heading in headings] == [
+        "scenarios",
+        "models",
+        "controllers",
+        "joints",
+        "bodies",
+    ]
+    for what in ("scenarios", "models", "controllers"):
+        start = lines.index(f"{what} (poise list {what}):") + 1
+        items = lines[start : start + len(listed(capsys, what))]
+        assert items == [f"  {line}" for line in listed(capsys, what)], what
+    assert "joints (poise list joints MODEL): " in "\n".join(lines)
+    assert "bodies (poise list bodies MODEL): " in "\n".join(lines)
+    result = subprocess.run(
+        [sys.executable, "-m", "controller_server.cli", "list"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert (result.returncode, result.stderr) == (0, "")
+    assert result.stdout.splitlines() == lines

@@ -161,7 +161,7 @@ def starter_scenario(
     root = description.bodies[0].name
     lines = [
         f"# Starter scenario for {description.name}, written by `poise inspect`.",
-        '# Run it: poise sim THIS_FILE   (see the keys: README, "Scenario files")',
+        '# Run it: poise sim THIS_FILE   (see the keys: docs/scenarios.md, "Scenario files")',
         f'name = "{description.name}_stand"',
         f'description = "{description.name} stands 5 s and takes a {push_N:g} N push for 0.1 s."',
         f"model = {_toml_string(model)}",

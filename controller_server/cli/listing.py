@@ -1,4 +1,8 @@
-"""``poise list``: scenarios, models, controllers, a model's joints or bodies, one per line."""
+"""``poise list``: scenarios, models, controllers, a model's joints or bodies, one per line.
+
+Without a category, every category: the items of those that need no model,
+and how to ask for the others.
+"""
 
 from __future__ import annotations
 
@@ -11,9 +15,19 @@ __all__ = ["LIST_WHAT", "add_parsers"]
 LIST_WHAT = ["scenarios", "models", "controllers", "joints", "bodies"]
 """What ``poise list`` lists; ``joints`` and ``bodies`` of one model."""
 
+_MODEL_CATEGORIES = {
+    "joints": "a model's joints in wire order, with the numbers initial_joint_position takes",
+    "bodies": "a model's bodies: what a push may name",
+}
+"""The categories that list one model's items, and what they list."""
+
 
 def _list(args: argparse.Namespace) -> int:
     """Print one line per item: scenarios, models, controllers, or a model's joints or bodies."""
+    if args.what is None:
+        for line in _every_category_lines():
+            print(line)
+        return 0
     if args.what in ("joints", "bodies") and args.model is None:
         raise UsageError(f"name the model: poise list {args.what} MODEL (poise list models)")
     if args.what not in ("joints", "bodies") and args.model is not None:
@@ -21,6 +35,18 @@ def _list(args: argparse.Namespace) -> int:
     for line in _list_lines(args.what, args.model):
         print(line)
     return 0
+
+
+def _every_category_lines() -> list[str]:
+    """Every category under a heading naming its own command; joints and bodies by their command."""
+    lines = []
+    for what in LIST_WHAT:
+        if what in _MODEL_CATEGORIES:
+            lines.append(f"{what} (poise list {what} MODEL): {_MODEL_CATEGORIES[what]}")
+        else:
+            lines.append(f"{what} (poise list {what}):")
+            lines.extend(f"  {line}" for line in _list_lines(what, None))
+    return lines
 
 
 def _list_lines(what: str, model: str | None) -> list[str]:
@@ -68,8 +94,15 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         description="Print one line per item: the built-in scenarios (with their description), "
         "models and controllers; the joints of MODEL in wire order (with the numbers "
         "initial_joint_position takes for each), or the bodies of MODEL (what a push may name). "
-        "MODEL is a built-in name or an .xml/.urdf file.",
+        "MODEL is a built-in name or an .xml/.urdf file. Without a category: every category, "
+        "each under a heading naming its command.",
     )
-    listing.add_argument("what", choices=LIST_WHAT, metavar="{" + ",".join(LIST_WHAT) + "}")
+    listing.add_argument(
+        "what",
+        nargs="?",
+        choices=LIST_WHAT,
+        metavar="{" + ",".join(LIST_WHAT) + "}",
+        help="the category (default: every category)",
+    )
     listing.add_argument("model", nargs="?", metavar="MODEL", help="for joints and bodies")
     listing.set_defaults(handler=_list)

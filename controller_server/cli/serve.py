@@ -80,7 +80,7 @@ def _serve(args: argparse.Namespace) -> int:
     if not config.curve_secret_key and not all(_is_loopback(e) for e in server.bound_endpoints):
         logging.getLogger("poise.server").warning(
             "serving without CURVE on a non-loopback endpoint: anyone who reaches it can "
-            "drive the robot; see the README's security section"
+            "drive the robot; see docs/serving.md"
         )
     print(f"{READY_PREFIX}{', '.join(server.bound_endpoints)}", flush=True)
     server.serve_forever()

@@ -150,8 +150,8 @@ OBJECTIVES: dict[str, tuple[int, float, str]] = {
 
 Table 1's order (contact; CM and CM height; angular momentum and rest
 pose) is one ``set_params`` away, but it is not the default, because the
-thesis humanoid falls under the thesis pushes with it (measured, see the
-README): a CM objective strictly above the angular momentum takes all of
+thesis humanoid falls under the thesis pushes with it (measured, see
+docs/control.md): a CM objective strictly above the angular momentum takes all of
 the centre of pressure's authority to stop the CM, and the body pitches
 with nothing left to damp its rotation; and the CM height of a body
 standing on straight knees is a singular feature that, ranked above the
