@@ -146,7 +146,14 @@ def run_poise(arguments: list[str], cwd: Path) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.parametrize(
-    ("arguments", "hints"), [m[1:] for m in MISTAKES], ids=[m[0] for m in MISTAKES]
+    ("arguments", "hints"),
+    [
+        # Nothing listening is told after the client's 10 s connect timeout.
+        pytest.param(
+            *m[1:], id=m[0], marks=[pytest.mark.slow] if m[0] == "nothing listening" else []
+        )
+        for m in MISTAKES
+    ],
 )
 def test_a_mistake_is_one_line_and_exit_code_2(arguments, hints, tmp_path):
     result = run_poise(arguments(tmp_path), tmp_path)

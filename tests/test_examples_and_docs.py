@@ -111,7 +111,7 @@ def test_hello_client_example_runs(server):
     [
         ("roundtrip.py", ["--count", "50"]),
         ("controller.py", ["--ticks", "30"]),
-        ("load.py", ["--seconds", "1"]),
+        pytest.param("load.py", ["--seconds", "1"], marks=pytest.mark.slow),  # 13 s
         ("record.py", ["--blocks", "2", "--block-ticks", "50"]),
         ("bridge.py", ["--count", "40", "--chunks", "2"]),
         ("estimator.py", ["--ticks", "60", "--chunks", "2"]),

@@ -13,7 +13,7 @@ from clients.sim.runner import run_scenario
 from clients.sim.scenario import PushSpec, load_scenario
 from clients.sim.sweep import ABLATIONS
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 DURATION_S = 2.5
 """Push at 0.5–0.6 s; a felled robot is down well before 2.5 s (checked by the sweep)."""

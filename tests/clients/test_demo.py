@@ -16,7 +16,7 @@ from clients.demo import DEMO_SCENARIOS
 from clients.visual.video import VIDEO_FPS
 from tests.helpers import moved, red_pixels, run_poise, video_frames
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 
 def test_demo_survives_the_thesis_pushes_and_writes_readable_plots_and_videos(server, tmp_path):

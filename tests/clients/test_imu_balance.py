@@ -13,7 +13,7 @@ from clients.sim.app import run_scenarios
 from clients.sim.errors import ScenarioError
 from clients.sim.scenario import load_scenario
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 TILT_ERROR_MAX_DEG = 1.0
 VELOCITY_ERROR_RMS_M_PER_S = 0.05

@@ -16,7 +16,7 @@ from controller_server.features.joint_limits import default_joint_limits
 from controller_server.models import load_robot_model
 from tests.helpers import REVOLUTE_CROUCH, base_tilt_deg
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 
 def worst_limit_excess_rad(record: RunRecord) -> float:

@@ -197,6 +197,7 @@ needs_chromium = pytest.mark.skipif(
 )
 
 
+@pytest.mark.browser
 @needs_chromium
 def test_the_page_shows_the_robot_moving_while_a_run_goes_on(tmp_path):
     (tmp_path / "view_push.toml").write_text(SCENARIO)
@@ -233,6 +234,7 @@ def write_swaying_log(path: Path, endpoint: str, duration_s: float, rate_hz: flo
             )
 
 
+@pytest.mark.browser
 @needs_chromium
 def test_the_page_shows_the_logs_robot_moving_while_it_is_replayed(tmp_path, server):
     log = tmp_path / "sway.mcap"

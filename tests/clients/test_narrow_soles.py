@@ -19,7 +19,7 @@ from clients.sim.scenario import PushSpec, load_scenario
 from controller_server.balance_points import polygon_width, support_polygon
 from controller_server.models.description import RobotDescription
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 SCENE = Path(__file__).resolve().parents[1] / "models" / "narrow_sole_humanoid" / "scene.xml"
 KEYFRAME = "home"

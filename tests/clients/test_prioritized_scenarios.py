@@ -28,6 +28,7 @@ def test_prioritized_controller_stands_in_both_simulators(server, backend):
     assert 0.0 < last.position_com_in_world[0] < 0.1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", ["reference", "mujoco"])
 def test_prioritized_controller_survives_the_thesis_pushes(server, backend, tmp_path):
     """Issue 5 acceptance: `push_sequence` and `head_push` in both simulators."""

@@ -9,7 +9,7 @@ import pytest
 from clients.demo import DEMO_SCENARIOS
 from clients.sim.app import run_scenarios
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 
 def test_full_controller_survives_the_thesis_pushes_in_mujoco(server, tmp_path):

@@ -59,6 +59,7 @@ def command(*args):
     )
 
 
+@pytest.mark.slow
 def test_poise_replay_exit_codes_and_report(server, recorded_run, tmp_path):
     clean = command("replay", str(recorded_run), "--connect", server.endpoint)
     assert clean.returncode == 0, clean.stderr
@@ -149,6 +150,7 @@ def test_poise_log_info_reads_the_fixtures():
 SIGKILL_AFTER_STATES = 300
 
 
+@pytest.mark.slow
 def test_a_recording_client_killed_mid_run_leaves_a_log_that_replays_up_to_the_kill(
     server, tmp_path
 ):

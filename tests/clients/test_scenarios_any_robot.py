@@ -152,6 +152,7 @@ def poise_sim(tmp_path: Path, *arguments: str, timeout_s: float = 600.0):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.e2e
 def test_the_built_ins_run_on_a_vendor_robot(tmp_path):
     """Once failed with `client_model has no joint 'left_hip'` (exit 2)."""

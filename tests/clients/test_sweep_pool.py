@@ -16,7 +16,7 @@ from clients.sim.scenario import PushSpec
 from clients.sim.sweep import SWEEP_CONTROLLERS, sweep_controllers
 from controller_server.cli import main
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 PUSH = PushSpec(body="chest", force_in_world_N=(1.0, 0.0, 0.0), start_s=0.1, duration_s=0.1)
 CONTROLLERS = {

@@ -15,7 +15,7 @@ from clients.sim.model_file import builtin_model_path
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import load_scenario
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 
 @pytest.mark.parametrize("name", ["squat", "low_friction_leg_circle"])

@@ -56,6 +56,7 @@ def vendor_scenario(directory: Path, controller: str) -> Path:
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("controller", ["momentum", "prioritized"])
 def test_a_vendor_scene_balances_5_s_and_survives_a_push_in_mujoco(server, controller, tmp_path):
     """Issue 18's acceptance: include, default classes, ``type="free"``, mesh feet, position

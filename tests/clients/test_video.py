@@ -38,6 +38,7 @@ def poise(arguments: list[str], cwd: Path) -> subprocess.CompletedProcess:
     return run_poise(arguments, cwd, timeout_s=300)
 
 
+@pytest.mark.slow
 def test_sim_video_shows_the_robot_moving_and_the_push_while_it_acts(tmp_path):
     scenario = tmp_path / "video_push.toml"
     scenario.write_text(SCENARIO)

@@ -19,7 +19,7 @@ from clients.sim.runner import RunRecord, run_scenario
 from clients.sim.scenario import ParamChange, load_scenario
 from tests.helpers import REVOLUTE_CROUCH, base_tilt_deg, run_poise
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 
 def speed_between(record: RunRecord, start_s: float, end_s: float) -> float:

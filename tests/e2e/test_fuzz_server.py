@@ -218,6 +218,7 @@ def fuzz_sessions(server):
     assert sum(total.values()) >= FUZZ_MESSAGES
 
 
+@pytest.mark.slow
 @settings(
     max_examples=FUZZ_MESSAGES // MESSAGES_PER_EXAMPLE,
     deadline=None,

@@ -338,6 +338,7 @@ def test_uploads_out_of_order_corrupt_too_long_or_beyond_a_bound_get_typed_error
         assert reply.code == ErrorCode.ASSETS_MISSING  # evicted for the reservations
 
 
+@pytest.mark.slow
 def test_a_log_of_files_sent_by_hash_replays_on_a_server_that_never_saw_them(
     large_robot_scene, tmp_path
 ):

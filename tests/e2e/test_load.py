@@ -10,7 +10,7 @@ import pytest
 from clients.load import run_clients
 from protocol.messages import Hello
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
 CLIENTS = 8
 SECONDS = 10.0

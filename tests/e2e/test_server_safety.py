@@ -228,6 +228,7 @@ def test_a_flooding_session_is_refused_beyond_its_in_flight_cap(tight_server):
         flood.ask(msgpack.packb({"type": "bye", "version": PROTOCOL_VERSION, "seq": 99}))
 
 
+@pytest.mark.slow
 def test_memory_of_500_expired_sessions_is_returned():
     """Defect 3: 2,000 abandoned sessions took 5.3 GB that never came back."""
     args = ["--session-timeout", "1", "--max-sessions", "600", "--max-sessions-per-client", "600"]

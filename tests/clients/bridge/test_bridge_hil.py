@@ -21,7 +21,7 @@ from clients.bridge.config import load_bridge_config
 from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
 from clients.server_process import ServerProcess
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.hil]
 
 EXAMPLES = Path(__file__).parents[3] / "examples" / "bridge"
 WALL_CLOCK_SLACK_S = 0.005
@@ -51,6 +51,7 @@ class StallProbe:
         self._thread.join()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("map_file", ["revolute_humanoid_mit.toml", "revolute_humanoid_mixed.toml"])
 def test_the_revolute_humanoid_balances_and_takes_a_chest_push_through_the_bridge(server, map_file):
     config = load_bridge_config(EXAMPLES / map_file)
@@ -152,6 +153,7 @@ def test_a_killed_server_puts_every_actuator_in_its_safe_state_within_the_watchd
     assert max(delays) <= watchdog_s + (stall.longest_s + WALL_CLOCK_SLACK_S if wall_clock else 0.0)
 
 
+@pytest.mark.slow
 def test_the_revolute_humanoid_stands_on_odrives(server):
     """Every joint on an emulated ODrive (torque control, float32 torques): 2 s standing."""
     config = load_bridge_config(EXAMPLES / "revolute_humanoid_mit.toml")

@@ -120,6 +120,7 @@ def estimates_often(monkeypatch):
     monkeypatch.setattr(bridge_app, "DIAGNOSTICS_PERIOD_TICKS", DIAGNOSTICS_PERIOD_TICKS)
 
 
+@pytest.mark.slow
 @pytest.mark.e2e
 def test_the_revolute_humanoid_stands_and_takes_a_push_on_the_servers_imu_estimate(
     server, estimates_often
