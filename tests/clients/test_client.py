@@ -147,6 +147,7 @@ def test_accepted_params_survive_a_reconnect(server):
         assert "point:gone" not in restored.params
 
 
+@pytest.mark.slow
 def test_an_expired_session_is_re_created_transparently(caplog):
     """`step`, the pipelined pair and `set_params` each re-create an expired session once."""
     rng = np.random.default_rng(2)

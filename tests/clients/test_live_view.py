@@ -281,6 +281,7 @@ def scene_updates(url: str, duration_s: float) -> dict[str, list]:
 EXAMPLE_MAP = Path(__file__).parents[2] / "examples" / "bridge" / "revolute_humanoid_mit.toml"
 
 
+@pytest.mark.slow
 def test_the_bridge_page_streams_the_robot_while_the_loop_runs(tmp_path, server):
     report = tmp_path / "report.json"
     bridge = poise_with_view(

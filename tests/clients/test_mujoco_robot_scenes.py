@@ -68,6 +68,7 @@ def robot_pairs(model, data, robot_bodies: set[int]) -> set[tuple[str, str]]:
 # -- bodies outside the robot --------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.e2e
 @pytest.mark.parametrize("backend", ["mujoco", "reference"])
 def test_a_jointed_dummy_body_in_the_scene_is_left_to_the_simulator(server, tmp_path, backend):
@@ -160,6 +161,7 @@ def test_overlapping_links_touch_at_the_standing_pose_unless_excluded():
     )
 
 
+@pytest.mark.slow
 @pytest.mark.e2e
 def test_a_robot_whose_links_overlap_stands_in_mujoco(server, tmp_path):
     result = poise_sim(
@@ -173,6 +175,7 @@ def test_a_robot_whose_links_overlap_stands_in_mujoco(server, tmp_path):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.e2e
 def test_without_the_exclusions_the_overlapping_robot_fights_itself_and_falls(server, monkeypatch):
     """The test robot reproduces the issue: the exclusions are what keep it up."""

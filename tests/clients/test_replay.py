@@ -196,6 +196,7 @@ def _states_on_disk(path: Path) -> int:
     return 0
 
 
+@pytest.mark.slow
 def test_poise_serve_record_writes_one_log_per_session_that_replays_clean(tmp_path):
     record_dir = tmp_path / "server-logs"
     with ServerProcess(extra_args=["--record", str(record_dir)]) as recording_server:

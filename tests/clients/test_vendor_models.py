@@ -77,6 +77,7 @@ def test_a_vendor_scene_balances_5_s_and_survives_a_push_in_mujoco(server, contr
     assert np.linalg.norm(velocity) < 0.05
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("model", "backend"),
     [

@@ -121,6 +121,7 @@ def sim(scene: Path, endpoint: str, output: Path, *more: str, log_level: str = "
     )
 
 
+@pytest.mark.slow
 def test_a_robot_whose_mesh_exceeds_the_message_cap_is_simulated_and_sent_once(
     capped_server, large_robot_scene, tmp_path
 ):

@@ -17,7 +17,18 @@ pytestmark = pytest.mark.e2e
 ROUND_TRIPS = 1000
 
 
-@pytest.mark.parametrize("which", [*BUILTIN_MODELS, "by_path", "by_text", "momentum"])
+@pytest.mark.parametrize(
+    "which",
+    # One in the fast tier; the rest, 2 s each, in the slow one.
+    [
+        "thesis_humanoid",
+        *(
+            pytest.param(w, marks=pytest.mark.slow)
+            for w in [*BUILTIN_MODELS, "by_path", "by_text", "momentum"]
+            if w != "thesis_humanoid"
+        ),
+    ],
+)
 def test_thousand_round_trips_are_dynamically_consistent(server, which, tmp_path):
     controller = "tracking"
     endpoint = server.endpoint

@@ -92,7 +92,13 @@ def test_mit_torques_reach_the_motors_quantized_to_12_bits(server):
         bridge.shutdown()
 
 
-@pytest.mark.parametrize("wall_clock", [False, True], ids=["simulated_time", "wall_clock"])
+@pytest.mark.parametrize(
+    "wall_clock",
+    [
+        pytest.param(False, id="simulated_time"),
+        pytest.param(True, id="wall_clock", marks=pytest.mark.slow),
+    ],
+)
 def test_a_killed_server_puts_every_actuator_in_its_safe_state_within_the_watchdog_time(
     wall_clock,
 ):
