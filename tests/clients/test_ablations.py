@@ -2,7 +2,7 @@
 fells the controller without it, in both simulators.
 
 The pushes are 0.1 s on the chest at t = 0.5 s, as in ``poise sim stand --sweep-push``,
-sized between the survival thresholds that sweep's bisection found (README "Push sweep"),
+sized between the survival thresholds that sweep's bisection found (docs/push-sweep.md),
 with a margin on both sides: a bisection near a survival boundary moves by a few newtons
 with round-off, so each push is at least 15 N from either threshold.
 """

@@ -112,7 +112,7 @@ FIXTURES = sorted((Path(__file__).parents[1] / "fixtures").glob("*.mcap"))
 
 @pytest.mark.parametrize("fixture", FIXTURES, ids=[path.stem for path in FIXTURES])
 def test_committed_fixtures_replay_clean(server, fixture):
-    """README "When replay fails": a change meant to keep behaviour keeps these passing."""
+    """A change meant to keep behaviour keeps these passing (docs/recording.md)."""
     report = replay_log(fixture, server.endpoint)
     states = summarize_log(fixture).counts["state sent"]
     assert states > 0 and report.compared == states

@@ -4,7 +4,7 @@ reference simulator, and the pushes, the speed change and the other robots in Mu
 Judged on the physics of the simulated states: how far and how fast the base moves, that it
 stays upright and its stance feet do not slide, that it really stands on one foot when pushed.
 Each run is a few simulated seconds (CI time); the 20 m walk is the built-in scenario `walk`
-(README, "Walking").
+(docs/behaviors.md, "Walking").
 """
 
 import json

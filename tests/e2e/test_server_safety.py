@@ -68,6 +68,13 @@ def worker_pids(server: ServerProcess) -> list[int]:
     return [int(pid) for pid in out.split()]
 
 
+def resume(pids: list[int]) -> None:
+    """SIGCONT to each process that still exists."""
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGCONT)
+
+
 def resident_mb(server: ServerProcess) -> float:
     total_kb = 0
     for pid in [server.process.pid, *worker_pids(server)]:
@@ -335,13 +342,28 @@ def test_curve_refuses_unknown_keys_and_plain_clients(curve_server):
 
 
 def test_sigterm_answers_requests_already_sent():
-    """Defect 8: SIGTERM dropped queued requests unanswered."""
-    with ServerProcess() as server, contextlib.ExitStack() as stack:
+    """Defect 8: SIGTERM dropped queued requests unanswered.
+
+    The workers are stopped (SIGSTOP) while the states go out, so that they are still in
+    flight when SIGTERM arrives, however busy the machine: the broker has a second to read
+    them, and none can be answered before SIGTERM (the deadline is longer than that).
+    """
+    with (
+        ServerProcess(extra_args=["--deadline", "10"]) as server,
+        contextlib.ExitStack() as stack,
+    ):
         peers = [stack.enter_context(Peer(server.endpoint)) for _ in range(3)]
         welcomes = [p.ask(Hello(model="thesis_humanoid", controller="momentum")) for p in peers]
+        workers = worker_pids(server)
+        for pid in workers:
+            os.kill(pid, signal.SIGSTOP)
+        stack.callback(resume, workers)  # whatever happens below
         for peer, welcome in zip(peers, welcomes, strict=True):
             peer.socket.send(encode(standing(welcome, seq=5)))
+        time.sleep(1.0)
+        assert not any(peer.socket.poll(0) for peer in peers)  # in flight, all of them
         server.process.send_signal(signal.SIGTERM)
+        resume(workers)
         for peer in peers:
             assert peer.socket.poll(REPLY_TIMEOUT_MS)
             reply = decode(peer.socket.recv())
