@@ -26,12 +26,18 @@ __all__ = ["run_scenarios", "server_endpoint"]
 
 
 @contextlib.contextmanager
-def server_endpoint(endpoint: str | None) -> Iterator[str]:
-    """Yield ``endpoint``, or start a `poise serve` process and yield its endpoint."""
+def server_endpoint(endpoint: str | None, deadline_s: float | None = None) -> Iterator[str]:
+    """Yield ``endpoint``, or start a `poise serve` process and yield its endpoint.
+
+    Args:
+        endpoint: A running server's, or ``None`` to start one on loopback.
+        deadline_s: The started server's ``--deadline`` (default ``poise serve``'s).
+    """
     if endpoint is not None:
         yield endpoint
         return
-    with ServerProcess() as process:
+    extra_args = [] if deadline_s is None else ["--deadline", f"{deadline_s:g}"]
+    with ServerProcess(extra_args=extra_args) as process:
         yield process.endpoint
 
 

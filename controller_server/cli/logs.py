@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from clients.pool import BATCH_DEADLINE_S
 from controller_server.cli.common import (
     UsageError,
     add_client_key_options,
@@ -13,15 +14,22 @@ from controller_server.cli.common import (
     live_view,
 )
 
-__all__ = ["add_parsers"]
+__all__ = ["EXIT_SERVER_LATE", "add_parsers"]
+
+EXIT_SERVER_LATE = 3
+"""``poise replay``'s exit code when the server did not answer in time (0 match,
+1 regression, 2 a log that cannot be replayed or a usage mistake)."""
 
 
 def _replay(args: argparse.Namespace) -> int:
     import json
+    import sys
 
+    from clients.client import ServerError, ServerTimeout
     from clients.progress import ProgressBar
     from clients.replay import ReplayError, replay_log
     from clients.sim.app import server_endpoint
+    from protocol import ErrorCode
     from protocol.recording import BadLog
 
     params = {}
@@ -36,7 +44,7 @@ def _replay(args: argparse.Namespace) -> int:
     try:
         with (
             live_view(args) as observer,
-            server_endpoint(args.connect) as endpoint,
+            server_endpoint(args.connect, deadline_s=args.deadline) as endpoint,
             ProgressBar(Path(args.log).name) as bar,
         ):
             report = replay_log(
@@ -52,6 +60,16 @@ def _replay(args: argparse.Namespace) -> int:
             )
     except (BadLog, ReplayError) as exc:
         raise UsageError(str(exc)) from None
+    except (ServerTimeout, ServerError) as exc:
+        if isinstance(exc, ServerError) and exc.code != ErrorCode.DEADLINE_EXCEEDED:
+            raise
+        # Neither a match nor a regression: the server could not answer in time.
+        print(
+            f"poise replay: the server did not answer in time ({exc}); on a busy machine "
+            "give a longer --deadline (a server of its own) or run it again",
+            file=sys.stderr,
+        )
+        return EXIT_SERVER_LATE
     if report.log_truncated:
         print(
             f"warning: the log ends early (its recorder was killed?): replayed the "
@@ -134,12 +152,21 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="replay a recorded log against a server and compare every command",
         description="Re-create the log's session from its recorded hello, send its states and "
         "set_params in order, compare each command with the recorded one (|new - old| <= "
-        "atol + rtol |old| per entry). Exit code 1 on a regression, 2 on a log that cannot be "
-        "replayed.",
+        "atol + rtol |old| per entry). Exit code 0 when every command matches, 1 on a "
+        "regression, 2 on a log that cannot be replayed (or a usage mistake), 3 when the "
+        "server could not answer in time.",
     )
     replay.add_argument("log", metavar="LOG", help="MCAP log (`poise sim --record DIR`)")
     replay.add_argument(
         "--connect", default=None, metavar="ENDPOINT", help="use a running server at ENDPOINT"
+    )
+    replay.add_argument(
+        "--deadline",
+        type=float,
+        default=BATCH_DEADLINE_S,
+        metavar="S",
+        help="--deadline of the server it starts (without --connect): a replay compares "
+        f"commands, not their timing (default: {BATCH_DEADLINE_S:g} s, as a sweep's servers)",
     )
     replay.add_argument("--atol", type=float, default=1e-9, help="absolute tolerance (1e-9)")
     replay.add_argument("--rtol", type=float, default=1e-9, help="relative tolerance (1e-9)")

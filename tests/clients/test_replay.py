@@ -74,6 +74,20 @@ def test_poise_replay_exit_codes_and_report(server, recorded_run, tmp_path):
     assert json.loads(report_path.read_text())["regression"] is True
 
 
+def test_a_server_that_cannot_answer_in_time_is_exit_code_3_not_a_regression(tmp_path):
+    """Issue 40: replay died on DEADLINE_EXCEEDED with exit 2, the code of an unusable log.
+
+    Its own server gets ``--deadline`` (default a sweep's 10 s); one given 0.5 ms cannot
+    answer a state, which is neither a match nor a regression."""
+    fixture = str(FIXTURES[0])
+    late = command("replay", fixture, "--deadline", "0.0005")
+    assert late.returncode == 3, (late.stdout, late.stderr)
+    assert late.stderr.count("\n") == 1 and "did not answer in time" in late.stderr, late.stderr
+    assert "--deadline" in late.stderr and "REGRESSION" not in late.stdout
+    with ServerProcess(extra_args=["--deadline", "0.0005"]) as server:
+        assert command("replay", fixture, "--connect", server.endpoint).returncode == 3
+
+
 @pytest.mark.parametrize("content", [b"", b"not a log at all\n"])
 def test_a_bad_log_is_one_line_and_exit_code_2(server, tmp_path, content):
     path = tmp_path / "bad.mcap"
