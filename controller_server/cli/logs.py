@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from clients.pool import BATCH_DEADLINE_S
 from controller_server.cli.common import (
     UsageError,
     add_client_key_options,
@@ -147,6 +146,10 @@ def _log_video(args: argparse.Namespace) -> int:
 
 def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``replay`` and ``log``."""
+    # Here, not at the top: clients.pool imports numpy, which must start after main() has
+    # set single-threaded BLAS (tests/test_blas_threads.py).
+    from clients.pool import BATCH_DEADLINE_S
+
     replay = commands.add_parser(
         "replay",
         help="replay a recorded log against a server and compare every command",
