@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +15,13 @@ from scipy.spatial.transform import Rotation
 
 from clients.sampling import random_state  # noqa: F401  (re-exported for tests)
 from protocol.messages import Command, State, Welcome
+
+
+def free_port() -> int:
+    """A TCP port free on loopback now (for a server a test starts, or one that is not there)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
 
 
 def examples(nightly: int) -> int:

@@ -15,12 +15,6 @@ from tests import helpers
 TIMEOUT_S = 90  # the slowest case waits out the client's 10 s hello timeout
 
 
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
 def scenario(directory: Path, text: str) -> str:
     path = directory / "mistake.toml"
     path.write_text('name = "mistake"\nduration_s = 0.05\n' + text)
@@ -43,7 +37,7 @@ def sim(directory: Path, *arguments: str) -> list[str]:
 MISTAKES = [
     (
         "nothing listening",
-        lambda d: sim(d, "stand", "--connect", f"tcp://127.0.0.1:{free_port()}"),
+        lambda d: sim(d, "stand", "--connect", f"tcp://127.0.0.1:{helpers.free_port()}"),
         ["nothing answers at tcp://127.0.0.1:", "is `poise serve` running there?"],
     ),
     (

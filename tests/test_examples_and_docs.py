@@ -2,7 +2,6 @@
 
 import os
 import re
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -13,6 +12,7 @@ from controller_server.cli import build_parser
 from controller_server.controllers import CONTROLLERS
 from controller_server.controllers.docgen import render_controllers_doc
 from protocol.docgen import render_protocol_doc
+from tests.helpers import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -288,12 +288,6 @@ def test_every_readme_command_is_run_or_says_why_not():
     for key in README_COMMANDS_NOT_RUN:
         assert any(key in command for command in commands), f"no README command has {key!r}"
     assert any(not_run_reason(command) is None for command in commands)
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 @pytest.mark.e2e

@@ -19,7 +19,6 @@ import os
 import re
 import select
 import shutil
-import socket
 import subprocess
 import time
 import urllib.request
@@ -37,7 +36,7 @@ from clients.client import ControllerClient
 from clients.state import RobotState
 from protocol.messages import Hello
 from protocol.recording import Recorder
-from tests.helpers import POISE
+from tests.helpers import POISE, free_port
 
 pytestmark = pytest.mark.e2e
 
@@ -65,12 +64,6 @@ PUSHES = "\n".join(
     for k, sign in enumerate([1, -1] * 15)
 )
 SCENARIO = f'name = "view_push"\nduration_s = 30.0\ndiagnostics_period_ticks = 10\n{PUSHES}'
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def robot_pixels(image: np.ndarray) -> int:
