@@ -604,7 +604,13 @@ class ControllerServer:
         The last reply of a route decides: a session the worker closed (bye,
         refused hello) loses its route; one the worker opened for a route that
         is gone meanwhile is dropped, so no session lives on without a route.
+        A reply that comes back past its deadline is answered
+        ``DEADLINE_EXCEEDED`` as if the broker had woken in time: whether a
+        late command reaches the client never depends on how busy the
+        machine is.
         """
+        if time.monotonic() > pending.deadline_s:
+            self._answer_late(pending, DEADLINE_DETAIL)
         self._answer(pending, reply)
         current = self.routes.get(pending.identity) is pending.route
         if session_open and not current:

@@ -165,6 +165,38 @@ def test_deadline_applies_to_every_tick():
             assert reply.seq == seq
 
 
+def test_a_reply_back_after_the_deadline_is_not_forwarded():
+    """A worker's reply that reaches a broker past the deadline is answered DEADLINE_EXCEEDED.
+
+    The broker is stopped (SIGSTOP) while the worker computes, so that the reply and
+    the deadline are both due when it wakes, however busy the machine: the late
+    command must not reach the client (a CI run once got one at a 0.5 ms deadline).
+    """
+    deadline_s = 1.5
+    with (
+        ServerProcess(extra_args=["--workers", "1", "--deadline", f"{deadline_s}"]) as server,
+        Peer(server.endpoint) as peer,
+        contextlib.ExitStack() as stack,
+    ):
+        welcome = peer.ask(Hello(model="thesis_humanoid", controller="momentum"))
+        assert isinstance(peer.ask(standing(welcome, seq=1)), Command)
+        (worker,) = worker_pids(server)
+        broker = server.process.pid
+        stack.callback(resume, [worker, broker])  # whatever happens below
+        os.kill(worker, signal.SIGSTOP)
+        peer.socket.send(encode(standing(welcome, seq=2)))
+        time.sleep(deadline_s / 2)  # the broker forwards it to the stopped worker
+        os.kill(broker, signal.SIGSTOP)
+        resume([worker])  # it starts within the deadline and replies to a sleeping broker
+        time.sleep(deadline_s)
+        resume([broker])
+        assert peer.socket.poll(REPLY_TIMEOUT_MS), "no reply"
+        reply = decode(peer.socket.recv())
+        assert isinstance(reply, Error) and reply.code == ErrorCode.DEADLINE_EXCEEDED, reply
+        assert reply.seq == 2
+        assert isinstance(peer.ask(standing(welcome, seq=3)), Command)  # the session lives on
+
+
 def test_session_caps_message_and_model_size():
     """Defect 3: caps with typed errors, and an oversized message is answered, not dropped."""
     args = ["--max-sessions", "6", "--max-message-bytes", "200000", "--max-model-bytes", "50000"]
