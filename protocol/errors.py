@@ -7,10 +7,12 @@ says what to fix. The same codes raise as :class:`ProtocolError` in Python.
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
 from enum import IntEnum
 from typing import Any
 
-__all__ = ["AssetsMissing", "ErrorCode", "PoiseError", "ProtocolError"]
+__all__ = ["AssetsMissing", "ErrorCode", "PoiseError", "ProtocolError", "did_you_mean"]
 
 
 class ErrorCode(IntEnum):
@@ -121,3 +123,13 @@ class AssetsMissing(ProtocolError):
             "`asset`, then repeat the hello",
             seq,
         )
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """``"did you mean 'left_knee'? "`` for the closest of ``known`` to a misspelled ``name``.
+
+    Empty when nothing is close (``difflib``'s ratio under 0.6): every "no such
+    name" message in Poise puts this before the list of the names it knows.
+    """
+    close = difflib.get_close_matches(name, list(known), n=1)
+    return f"did you mean {close[0]!r}? " if close else ""

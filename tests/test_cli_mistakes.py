@@ -28,6 +28,21 @@ def scene_without_robot(directory: Path) -> Path:
     return path
 
 
+def existing_file(directory: Path) -> Path:
+    path = directory / "results"
+    path.write_text("not a directory")
+    return path
+
+
+def robot_directory(directory: Path) -> Path:
+    """A vendor's robot folder, given where its file was meant."""
+    folder = directory / "h1"
+    folder.mkdir()
+    for name in ("scene.xml", "robot.urdf", "README.md"):
+        (folder / name).write_text("")
+    return folder
+
+
 def sim(directory: Path, *arguments: str) -> list[str]:
     """``poise sim ARGUMENTS`` writing its report (if it got that far) into ``directory``."""
     return ["sim", *arguments, "--output", str(directory / "out")]
@@ -125,7 +140,54 @@ MISTAKES = [
     (
         "unknown controller parameter",
         lambda d: sim(d, scenario(d, "[params]\nstifnes = 3.0\n")),
-        ["the server refused the request: INVALID_PARAMS", "stifnes"],
+        [
+            "the server refused the request: INVALID_PARAMS",
+            "stifnes",
+            "did you mean 'stiffness'?",
+        ],
+    ),
+    (
+        "an option of the wrong kind",
+        lambda d: sim(d, "stand", "--backend", "bullet"),
+        [
+            "poise sim: argument --backend: invalid choice: 'bullet'",
+            "(`poise sim --help` for more)",
+        ],
+    ),
+    (
+        "an option the subcommand does not have",
+        lambda d: ["log", "info", "x.mcap", "--frobnicate"],
+        ["poise log info: unrecognized arguments: --frobnicate", "`poise log info --help`"],
+    ),
+    (
+        "a negative bridge duration",
+        lambda d: ["bridge", "map.toml", "--emulate", "--duration", "-5"],
+        ["poise bridge: argument --duration: -5 is not a finite number zero or more"],
+    ),
+    (
+        "a negative replay deadline",
+        lambda d: ["replay", "log.mcap", "--deadline", "-1"],
+        ["argument --deadline: -1 is not a finite number above zero"],
+    ),
+    (
+        "no workers",
+        lambda d: sim(d, "stand", "--workers", "0"),
+        ["argument --workers: 0 is not a whole number above zero"],
+    ),
+    (
+        "a sweep's push of negative duration",
+        lambda d: sim(d, "stand", "--sweep-push", "--push-duration", "-0.1"),
+        ["argument --push-duration: -0.1 is not a finite number above zero"],
+    ),
+    (
+        "a file where the output directory goes",
+        lambda d: ["demo", "--output", str(existing_file(d))],
+        ["poise demo: --output", "a file is in the way", "choose another --output"],
+    ),
+    (
+        "a model path that is a directory",
+        lambda d: sim(d, "stand", "--model", str(robot_directory(d))),
+        ["is a directory: give the robot's .xml", "in it: robot.urdf, scene.xml"],
     ),
     (
         "joint value of the wrong length",

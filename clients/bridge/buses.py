@@ -9,7 +9,6 @@ motor is whatever it was calibrated with, so its ``motor`` is free text).
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -24,6 +23,7 @@ from clients.bridge.protocols.dynamixel import DYNAMIXEL_MODELS
 from clients.bridge.protocols.dynamixel_bus import DynamixelBus
 from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
 from clients.bridge.protocols.odrive_bus import ODriveBus
+from protocol.errors import did_you_mean
 
 __all__ = [
     "bus_time_per_tick_s",
@@ -61,8 +61,7 @@ def check_motors(config: BridgeConfig) -> None:
         catalogue = motor_catalogue(protocol)
         if catalogue is None or actuator.motor in catalogue:
             continue
-        close = difflib.get_close_matches(actuator.motor, list(catalogue), n=1)
-        hint = f"did you mean {close[0]!r}? " if close else ""
+        hint = did_you_mean(actuator.motor, catalogue)
         raise BridgeConfigError(
             f"joints.{joint}.motor = {actuator.motor!r}: not a {protocol} motor model; "
             f"{hint}known: {', '.join(catalogue)}"

@@ -19,7 +19,6 @@ joints at start (:func:`check_against_welcome`).
 
 from __future__ import annotations
 
-import difflib
 import math
 import tomllib
 from pathlib import Path
@@ -39,7 +38,7 @@ from pydantic import (
 from clients.sim.imu import ImuSpec
 from clients.sim.model_file import body_names, describe_model, resolve_model_path
 from clients.sim.scenario import PushSpec, explain
-from protocol.errors import PoiseError
+from protocol.errors import PoiseError, did_you_mean
 from protocol.messages import Welcome
 
 __all__ = [
@@ -400,8 +399,7 @@ def imu_mount_on_root_body(config: BridgeConfig) -> tuple[str, pin.SE3]:
     if settings.frame:
         names = [frame.name for frame in model.frames]
         if settings.frame not in names:
-            close = difflib.get_close_matches(settings.frame, names, n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
+            hint = did_you_mean(settings.frame, names)
             raise BridgeConfigError(
                 f"[imu] frame = {settings.frame!r}: {path.name} has no such frame; {hint}"
                 "frames on the root body: "

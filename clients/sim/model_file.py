@@ -74,10 +74,18 @@ def resolve_model_path(model: str) -> Path:
     """A built-in name or a file path (one with a suffix, e.g. ``robot.xml``).
 
     Raises:
-        FileNotFoundError: No such file, or no built-in of that name; the
-            message says which, and lists the built-ins.
+        FileNotFoundError: No such file, a directory, or no built-in of that
+            name; the message says which, and lists the built-ins (or the
+            directory's model files).
     """
     path = Path(model)
+    if path.is_dir():
+        found = sorted(p.name for p in path.iterdir() if p.suffix.lower() in (".xml", ".urdf"))
+        hint = f"; in it: {', '.join(found[:6])}{', …' if len(found) > 6 else ''}" if found else ""
+        raise FileNotFoundError(
+            f"model {model!r} is a directory: give the robot's .xml (MJCF, a scene with "
+            f"includes is fine) or .urdf file{hint}"
+        )
     if not path.suffix:
         return builtin_model_path(model)
     if not path.is_file():

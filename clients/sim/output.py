@@ -19,12 +19,16 @@ from typing import Any
 
 from protocol.errors import PoiseError
 
-__all__ = ["OutputBusy", "OutputDirectory"]
+__all__ = ["OutputBusy", "OutputDirectory", "OutputUnusable"]
 
 LOCK_NAME = ".poise-run.lock"
 
 
-class OutputBusy(PoiseError, RuntimeError):
+class OutputUnusable(PoiseError, OSError):
+    """The output directory cannot be made (a file is in its way, no permission)."""
+
+
+class OutputBusy(OutputUnusable):
     """Another run writes to the output directory; the message names it and what to do."""
 
 
@@ -33,7 +37,7 @@ class OutputDirectory:
 
     Raises:
         OutputBusy: Another run holds the directory.
-        OSError: The directory cannot be created.
+        OutputUnusable: The directory cannot be created (a file in the way, no permission).
     """
 
     def __init__(self, path: str | os.PathLike[str]):
@@ -41,7 +45,18 @@ class OutputDirectory:
         self._lock_file: Any = None
 
     def __enter__(self) -> OutputDirectory:
-        self.path.mkdir(parents=True, exist_ok=True)
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+        except (FileExistsError, NotADirectoryError):
+            raise OutputUnusable(
+                f"--output {str(self.path)!r}: a file is in the way (the output is a "
+                "directory): choose another --output"
+            ) from None
+        except PermissionError as exc:
+            raise OutputUnusable(
+                f"--output {str(self.path)!r}: cannot create it ({exc.strerror}): "
+                "choose another --output"
+            ) from None
         lock = open(self.path / LOCK_NAME, "a+")  # closed in __exit__
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)

@@ -15,6 +15,7 @@ import logging
 import signal
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from controller_server.blas import default_to_single_threaded_blas
 from controller_server.cli import bridge, inspect, listing, logs, runs, serve
@@ -23,9 +24,31 @@ from controller_server.cli.common import CONTROLLER_NAMES, UsageError, as_usage_
 __all__ = ["CONTROLLER_NAMES", "UsageError", "build_parser", "main"]
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose mistakes are one line naming the (sub)command, exit code 2.
+
+    argparse prints the whole usage block before its message; a user wants the
+    message and where to read more. Subparsers are made of this class too
+    (``add_subparsers`` uses the parent's), and each records itself in the
+    namespace it parses, so that arguments left over are reported by the
+    subcommand they were given to.
+    """
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: {message} (`{self.prog} --help` for more)\n")
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        parsed, extras = super().parse_known_args(args, namespace)
+        if getattr(parsed, "parser", None) is None:  # the innermost subcommand sets it first
+            parsed.parser = self
+        return parsed, extras
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``poise`` (also used to document the CLI)."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="poise",
         description="Poise: whole-body balance control for bipeds, served over ZeroMQ.",
     )
@@ -60,7 +83,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     (a partial report), exit code 130.
     """
     default_to_single_threaded_blas()
-    args = build_parser().parse_args(argv)
+    args, extras = build_parser().parse_known_args(argv)
+    if extras:
+        args.parser.error(f"unrecognized arguments: {' '.join(extras)}")
     logging.basicConfig(
         level=args.log_level, format="%(asctime)s %(name)s %(levelname)s %(message)s"
     )

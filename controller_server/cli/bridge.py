@@ -11,6 +11,7 @@ from controller_server.cli.common import (
     check_endpoint_option,
     curve_keys,
     live_view,
+    non_negative,
 )
 
 __all__ = ["add_parsers"]
@@ -70,7 +71,7 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
     )
     bridge.add_argument(
         "--duration",
-        type=float,
+        type=non_negative,
         default=None,
         metavar="SECONDS",
         help="stop after this long (default: the map's duration_s; 0: until stopped)",

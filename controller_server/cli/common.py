@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -22,6 +23,9 @@ __all__ = [
     "check_endpoint_option",
     "curve_keys",
     "live_view",
+    "non_negative",
+    "positive",
+    "positive_int",
     "prepare_video",
 ]
 
@@ -51,7 +55,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     from clients.client import ServerError, ServerTimeout
     from clients.pool import ClusterUnavailable
     from clients.sim.errors import ScenarioError, UnsupportedModel
-    from clients.sim.output import OutputBusy
+    from clients.sim.output import OutputUnusable
     from clients.visual.gl import RenderingUnavailable
     from clients.visual.live_process import LiveViewError
     from controller_server.models.description import DescriptionError
@@ -67,7 +71,7 @@ def as_usage_error(exc: Exception) -> UsageError | None:
         | InvalidEndpoint
         | ServerTimeout
         | ClusterUnavailable
-        | OutputBusy
+        | OutputUnusable
         | BridgeConfigError
         | BridgeStartError
         | BusError
@@ -77,6 +81,33 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     ):
         return UsageError(str(exc))
     return None
+
+
+def positive(text: str) -> float:
+    """An option's number that must be finite and above zero (a duration, a deadline)."""
+    return _number(text, float, above_zero=True)
+
+
+def non_negative(text: str) -> float:
+    """An option's number that must be finite and at least zero (a start time, a tolerance)."""
+    return _number(text, float, above_zero=False)
+
+
+def positive_int(text: str) -> int:
+    """An option's whole number that must be at least one (workers, a count)."""
+    return int(_number(text, int, above_zero=True))
+
+
+def _number(text: str, kind: type[float] | type[int], above_zero: bool) -> float:
+    try:
+        value = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value) or value < 0 or (above_zero and value == 0):
+        noun = "whole number" if kind is int else "finite number"
+        needed = "above zero" if above_zero else "zero or more"
+        raise argparse.ArgumentTypeError(f"{text} is not a {noun} {needed}")
+    return value
 
 
 def check_endpoint_option(option: str, endpoints: Sequence[str] | str | None) -> None:

@@ -11,6 +11,8 @@ from controller_server.cli.common import (
     add_view_options,
     curve_keys,
     live_view,
+    non_negative,
+    positive,
 )
 
 __all__ = ["EXIT_SERVER_LATE", "add_parsers"]
@@ -165,14 +167,14 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
     )
     replay.add_argument(
         "--deadline",
-        type=float,
+        type=positive,
         default=BATCH_DEADLINE_S,
         metavar="S",
         help="--deadline of the server it starts (without --connect): a replay compares "
         f"commands, not their timing (default: {BATCH_DEADLINE_S:g} s, as a sweep's servers)",
     )
-    replay.add_argument("--atol", type=float, default=1e-9, help="absolute tolerance (1e-9)")
-    replay.add_argument("--rtol", type=float, default=1e-9, help="relative tolerance (1e-9)")
+    replay.add_argument("--atol", type=non_negative, default=1e-9, help="absolute tolerance (1e-9)")
+    replay.add_argument("--rtol", type=non_negative, default=1e-9, help="relative tolerance (1e-9)")
     replay.add_argument(
         "--set",
         action="append",

@@ -14,6 +14,9 @@ from controller_server.cli.common import (
     check_endpoint_option,
     curve_keys,
     live_view,
+    non_negative,
+    positive,
+    positive_int,
     prepare_video,
 )
 
@@ -97,13 +100,6 @@ def _sim(args: argparse.Namespace) -> int:
     return 0
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is not a positive number of workers")
-    return value
-
-
 def _demo(args: argparse.Namespace) -> int:
     prepare_video(args)
     from clients.demo import run_demo
@@ -171,7 +167,7 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
     )
     sim.add_argument(
         "--duration",
-        type=float,
+        type=positive,
         metavar="SECONDS",
         help="simulated time of every scenario (default: each scenario's own; a sweep's "
         "trials last at least 3 s past their push)",
@@ -197,7 +193,7 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
     )
     sim.add_argument(
         "--workers",
-        type=_positive_int,
+        type=positive_int,
         default=None,
         metavar="N",
         help="run the sweep's bisections, or the scenarios, on N local worker processes "
@@ -241,14 +237,14 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
     )
     sim.add_argument(
         "--push-start",
-        type=float,
+        type=non_negative,
         default=0.5,
         metavar="SECONDS",
         help="when the swept push starts, in simulated time (default: 0.5)",
     )
     sim.add_argument(
         "--push-duration",
-        type=float,
+        type=positive,
         default=0.1,
         metavar="SECONDS",
         help="how long the swept push lasts (default: 0.1)",

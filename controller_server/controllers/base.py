@@ -22,6 +22,7 @@ from controller_server.dynamics import DynamicsTerms
 from controller_server.errors import ControllerFailed, InvalidParams
 from controller_server.models import RobotModel
 from controller_server.params import ParamSpec
+from protocol.errors import did_you_mean
 
 __all__ = [
     "CONTACT_PARAMETERS",
@@ -214,7 +215,10 @@ class Controller(ABC):
         spec = self.PARAMETERS.get(key)
         field = f"params.{key}"
         if spec is None:
-            raise InvalidParams(field, f"unknown parameter; known: {', '.join(self.PARAMETERS)}")
+            hint = did_you_mean(key, self.PARAMETERS)
+            raise InvalidParams(
+                field, f"unknown parameter; {hint}known: {', '.join(self.PARAMETERS)}"
+            )
         if spec.kind == "choice":
             if value not in spec.choices:
                 raise InvalidParams(field, f"{value=!r}; choose one of {spec.choices}")

@@ -21,8 +21,6 @@ the filter restarts at the next state, and the state of the gap is answered with
 
 from __future__ import annotations
 
-import difflib
-
 import numpy as np
 import pinocchio as pin
 
@@ -31,6 +29,7 @@ from controller_server.estimation.base_estimator import BaseEstimator
 from controller_server.estimation.estimate import BaseEstimate, EstimatorPrior, ImuMount
 from controller_server.estimation.leg_kinematics import grounded_leg_kinematics
 from controller_server.models import RobotModel
+from protocol.errors import did_you_mean
 from protocol.messages import Hello, State
 
 __all__ = ["AHRS_TILT_PRIOR_RAD", "MAX_STATE_GAP_S", "ImuBaseEstimator", "imu_mount"]
@@ -70,8 +69,7 @@ def imu_mount(robot: RobotModel, hello: Hello) -> ImuMount:
         return ImuMount(offset.rotation, offset.translation)
     names = [frame.name for frame in model.frames if frame.name not in ("universe", "root_joint")]
     if hello.imu_frame not in names:
-        close = difflib.get_close_matches(hello.imu_frame, names, n=1)
-        hint = f"did you mean {close[0]!r}? " if close else ""
+        hint = did_you_mean(hello.imu_frame, names)
         raise ImuFrameError(
             "imu_frame",
             f"{robot.name} has no frame {hello.imu_frame!r}; {hint}frames on the root body: "

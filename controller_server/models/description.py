@@ -43,7 +43,6 @@ From the model, a :class:`RobotDescription` finds:
 
 from __future__ import annotations
 
-import difflib
 import os
 import posixpath
 import xml.etree.ElementTree as ET
@@ -55,6 +54,7 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
+from protocol.errors import did_you_mean
 from protocol.messages import ContactSpec
 
 __all__ = [
@@ -140,8 +140,7 @@ class FrameNotFoundError(DescriptionError):
     def __init__(self, frame: str, available: list[str]):
         self.frame = frame
         self.available = available
-        close = difflib.get_close_matches(frame, available, n=1)
-        hint = f"did you mean {close[0]!r}? " if close else ""
+        hint = did_you_mean(frame, available)
         super().__init__(
             f"no frame {frame!r} in the model; {hint}frames: {', '.join(available)}",
             field="contacts",
@@ -1311,11 +1310,10 @@ def _read_srdf(
             if model.existJointName(joint_name) and model.getJointId(joint_name) > 1:
                 _set_joint(q, model, model.getJointId(joint_name), joint, name, path)
             elif joint_name not in urdf_joints and joint_name not in virtual:
-                close = difflib.get_close_matches(joint_name, list(model.names[2:]), n=1)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(joint_name, model.names[2:]).rstrip()
                 raise DescriptionError(
                     f"the SRDF {path!r}: group_state {name!r} sets joint {joint_name!r}, which "
-                    f"the URDF does not have{hint}"
+                    f"the URDF does not have{'; ' + hint if hint else ''}"
                 )
     pairs: set[tuple[str, str]] = set()
     unknown: list[str] = []

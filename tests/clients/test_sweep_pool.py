@@ -154,7 +154,7 @@ def test_workers_must_be_positive(capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["sim", "stand", "--workers", "0"])
     assert exit_info.value.code == 2
-    assert "0 is not a positive number of workers" in capsys.readouterr().err
+    assert "argument --workers: 0 is not a whole number above zero" in capsys.readouterr().err
 
 
 def start_battery(server, tmp_path):
