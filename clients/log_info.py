@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import textwrap
 from collections import Counter
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -100,6 +101,17 @@ def summarize_log(
     return summary
 
 
+LINE_CHARS = 96
+"""``poise log info`` wraps a long parameter (a per-joint list) at this width."""
+
+
+def _parameter_text(value: object) -> str:
+    """A parameter as the hello sent it; numbers in lists without trailing zeros."""
+    if isinstance(value, list) and all(isinstance(v, int | float) for v in value):
+        return "[" + ", ".join(f"{v:g}" for v in value) + "]"
+    return repr(value)
+
+
 def format_summary(path: str | os.PathLike[str], summary: LogSummary) -> str:
     """The text ``poise log info`` prints."""
     lines = [
@@ -111,8 +123,16 @@ def format_summary(path: str | os.PathLike[str], summary: LogSummary) -> str:
             f"session {index}: model {session.model_name} ({session.model_hash[:12]}…), "
             f"controller {session.controller}"
         )
-        params = ", ".join(f"{key}={value!r}" for key, value in sorted(session.params.items()))
-        lines.append(f"  parameters: {params}")
+        lines.append(f"  parameters ({len(session.params)}):")
+        width = max((len(key) for key in session.params), default=0) + 2
+        for key, value in sorted(session.params.items()):
+            lines += textwrap.wrap(
+                _parameter_text(value),
+                LINE_CHARS,
+                initial_indent=f"    {key:<{width}}",
+                subsequent_indent=" " * (4 + width),
+                break_on_hyphens=False,
+            ) or [f"    {key}"]
     for key, count in sorted(summary.counts.items()):
         lines.append(f"  {key:<20}{count:>8}")
     return "\n".join(lines)

@@ -19,7 +19,13 @@ def inspected(capsys, *arguments: str) -> list[str]:
 def test_a_vendor_scene_shows_joints_limits_servos_contacts_and_pose(capsys):
     lines = inspected(capsys, str(SCENE), "--keyframe", "home")
     builtin = load_robot_model("revolute_humanoid")
-    start = lines.index("joints (wire order): name, kind, range, torque limit, actuator") + 1
+    start = (
+        lines.index(
+            "joints (wire order): name, kind, range (rad; prismatic: m), "
+            "torque limit (N·m; prismatic: N), actuator"
+        )
+        + 1
+    )
     rows = [line.split() for line in lines[start : start + len(builtin.joints)]]
     assert [row[0] for row in rows] == [joint.name for joint in builtin.joints]
     limits = {row[0]: float(row[4]) for row in rows}  # name kind [low, high] limit

@@ -26,6 +26,48 @@ def test_scenarios_one_line_each_with_its_description(capsys):
     assert any(line.startswith("stand ") and "Quiet standing" in line for line in lines)
 
 
+def test_a_cut_description_says_so_and_full_shows_it_whole(capsys):
+    from clients.sim.scenario import builtin_scenario_names, load_scenario
+
+    assert main(["list", "scenarios"]) == 0
+    printed = capsys.readouterr()
+    assert any(line.endswith("…") for line in printed.out.splitlines())
+    assert printed.err == (
+        "(… descriptions cut to one line: `poise list scenarios --full` shows them whole)\n"
+    )
+    full = listed(capsys, "scenarios", "--full")
+    names = [line for line in full if not line.startswith(" ")]
+    assert names == builtin_scenario_names()
+    for name in names:  # every word of the description, under its name, in order
+        start = full.index(name) + 1
+        end = next((i for i in range(start, len(full)) if not full[i].startswith(" ")), None)
+        text = " ".join(" ".join(full[start:end]).split())
+        assert text == " ".join(load_scenario(name).description.split())
+        assert all(len(line) <= 88 for line in full[start:end])
+
+
+def test_a_reader_that_left_is_no_traceback():
+    """``poise list | head`` closes the pipe early: no BrokenPipeError on the screen."""
+    import os
+
+    from tests.helpers import POISE
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader is gone before the first line
+    try:
+        result = subprocess.run(
+            [*POISE, "list", "scenarios", "--full"],
+            stdout=write_end,
+            stderr=subprocess.PIPE,
+            text=True,
+            timeout=60,
+        )
+    finally:
+        os.close(write_end)
+    assert result.stderr == ""
+    assert result.returncode == 141  # 128 + SIGPIPE, as a program the signal stopped
+
+
 def test_models_and_controllers(capsys):
     assert listed(capsys, "models") == sorted(BUILTIN_MODELS)
     controllers = listed(capsys, "controllers")
@@ -94,5 +136,5 @@ def test_no_category_lists_every_category(capsys):
         text=True,
         timeout=60,
     )
-    assert (result.returncode, result.stderr) == (0, "")
+    assert result.returncode == 0 and "Traceback" not in result.stderr
     assert result.stdout.splitlines() == lines

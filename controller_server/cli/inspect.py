@@ -76,7 +76,8 @@ def report_lines(description: RobotDescription) -> list[str]:
         f"CM height {com[2]:.3f} m",
         f"keyframes: {', '.join(description.keyframes) or 'none'}",
         *_disabled_pairs_lines(description),
-        "joints (wire order): name, kind, range, torque limit, actuator",
+        "joints (wire order): name, kind, range (rad; prismatic: m), "
+        "torque limit (N·m; prismatic: N), actuator",
     ]
     for joint_id in range(2, model.njoints):
         joint = model.joints[joint_id]

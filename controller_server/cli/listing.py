@@ -1,12 +1,16 @@
 """``poise list``: scenarios, models, controllers, a model's joints or bodies, one per line.
 
 Without a category, every category: the items of those that need no model,
-and how to ask for the others.
+and how to ask for the others. A scenario's description is cut to one line
+(the cut ends in "…", and a line on stderr says so); ``--full`` prints each whole,
+wrapped under its name.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
+import textwrap
 
 from controller_server.cli.common import CONTROLLER_NAMES, UsageError
 
@@ -14,6 +18,10 @@ __all__ = ["LIST_WHAT", "add_parsers"]
 
 LIST_WHAT = ["scenarios", "models", "controllers", "joints", "bodies"]
 """What ``poise list`` lists; ``joints`` and ``bodies`` of one model."""
+
+DESCRIPTION_CHARS = 80
+"""A scenario's description on one line of ``poise list`` (``--full``: whole)."""
+CUT = "…"
 
 _MODEL_CATEGORIES = {
     "joints": "a model's joints in wire order, with the numbers initial_joint_position takes",
@@ -25,19 +33,24 @@ _MODEL_CATEGORIES = {
 def _list(args: argparse.Namespace) -> int:
     """Print one line per item: scenarios, models, controllers, or a model's joints or bodies."""
     if args.what is None:
-        for line in _every_category_lines():
-            print(line)
-        return 0
-    if args.what in ("joints", "bodies") and args.model is None:
-        raise UsageError(f"name the model: poise list {args.what} MODEL (poise list models)")
-    if args.what not in ("joints", "bodies") and args.model is not None:
-        raise UsageError(f"poise list {args.what} takes no MODEL")
-    for line in _list_lines(args.what, args.model):
+        lines = _every_category_lines(args.full)
+    else:
+        if args.what in ("joints", "bodies") and args.model is None:
+            raise UsageError(f"name the model: poise list {args.what} MODEL (poise list models)")
+        if args.what not in ("joints", "bodies") and args.model is not None:
+            raise UsageError(f"poise list {args.what} takes no MODEL")
+        lines = _list_lines(args.what, args.model, args.full)
+    for line in lines:
         print(line)
+    if any(line.endswith(CUT) for line in lines):
+        print(  # on stderr: the items stay one per line for a script
+            f"({CUT} descriptions cut to one line: `poise list scenarios --full` shows them whole)",
+            file=sys.stderr,
+        )
     return 0
 
 
-def _every_category_lines() -> list[str]:
+def _every_category_lines(full: bool) -> list[str]:
     """Every category under a heading naming its own command; joints and bodies by their command."""
     lines = []
     for what in LIST_WHAT:
@@ -45,19 +58,27 @@ def _every_category_lines() -> list[str]:
             lines.append(f"{what} (poise list {what} MODEL): {_MODEL_CATEGORIES[what]}")
         else:
             lines.append(f"{what} (poise list {what}):")
-            lines.extend(f"  {line}" for line in _list_lines(what, None))
+            lines.extend(f"  {line}" for line in _list_lines(what, None, full))
     return lines
 
 
-def _list_lines(what: str, model: str | None) -> list[str]:
+def _list_lines(what: str, model: str | None, full: bool = False) -> list[str]:
     if what == "scenarios":
         from clients.sim.scenario import builtin_scenario_names, load_scenario
 
         lines = []
         for name in builtin_scenario_names():
             description = " ".join(load_scenario(name).description.split())
-            if len(description) > 80:
-                description = description[:79] + "…"
+            if full:
+                lines.append(name)
+                lines.extend(
+                    textwrap.wrap(
+                        description, 88, initial_indent=" " * 4, subsequent_indent=" " * 4
+                    )
+                )
+                continue
+            if len(description) > DESCRIPTION_CHARS:
+                description = description[: DESCRIPTION_CHARS - 1] + CUT
             lines.append(f"{name:<26}{description}".rstrip())
         return lines
     if what == "models":
@@ -105,4 +126,9 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="the category (default: every category)",
     )
     listing.add_argument("model", nargs="?", metavar="MODEL", help="for joints and bodies")
+    listing.add_argument(
+        "--full",
+        action="store_true",
+        help="scenario descriptions whole, wrapped under each name (default: one line each)",
+    )
     listing.set_defaults(handler=_list)

@@ -159,6 +159,14 @@ def test_poise_log_info_reads_the_fixtures():
         assert result.returncode == 0, result.stderr
         assert "session 1: model thesis_humanoid" in result.stdout
         assert "state sent" in result.stdout
+        # the recorded hello's parameters, one per line under a count (issue 40)
+        lines = result.stdout.splitlines()
+        start = next(i for i, line in enumerate(lines) if line.startswith("  parameters ("))
+        count = int(lines[start].split("(")[1].split(")")[0])
+        block = [line for line in lines[start + 1 :] if line.startswith("    ")]
+        assert all(len(line) <= 96 for line in block)  # long lists wrap, indented further
+        names = [line.split()[0] for line in block if not line.startswith("     ")]
+        assert len(names) == count and names == sorted(names) and "cop_margin" in names
 
 
 SIGKILL_AFTER_STATES = 300
