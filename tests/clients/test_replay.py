@@ -88,6 +88,32 @@ def test_a_server_that_cannot_answer_in_time_is_exit_code_3_not_a_regression(tmp
         assert command("replay", fixture, "--connect", server.endpoint).returncode == 3
 
 
+@contextlib.contextmanager
+def cpu_burners(count: int):
+    """``count`` processes spinning on the CPU (a shared 2-core machine), killed after."""
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
+    try:
+        yield
+    finally:
+        for burner in burners:
+            burner.kill()
+            burner.wait()
+
+
+@pytest.mark.slow
+def test_the_readmes_replay_is_a_regression_on_a_busy_machine():
+    """Issue 40: beside CPU burners the README's example died on DEADLINE_EXCEEDED, exit 2.
+
+    Its own server answers within a sweep's deadline, so a changed gain is what it
+    reports, however busy the machine: REGRESSION, exit code 1.
+    """
+    fixture = Path(__file__).parents[1] / "fixtures" / "replay_momentum_push.mcap"
+    with cpu_burners(2):
+        changed = command("replay", str(fixture), "--set", "stiffness=40")
+    assert changed.returncode == 1, (changed.stdout, changed.stderr)
+    assert "REGRESSION" in changed.stdout
+
+
 @pytest.mark.parametrize("content", [b"", b"not a log at all\n"])
 def test_a_bad_log_is_one_line_and_exit_code_2(server, tmp_path, content):
     path = tmp_path / "bad.mcap"
