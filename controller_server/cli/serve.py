@@ -113,8 +113,12 @@ def _keygen(args: argparse.Namespace) -> int:
     if public.exists() or secret.exists():
         print(f"poise keygen: {public} or {secret} exists; choose another --name", file=sys.stderr)
         return 2
-    zmq.auth.create_certificates(str(directory), args.name)
-    secret.chmod(0o600)
+    old_umask = os.umask(0o077)  # the secret is never readable by others, not for an instant
+    try:
+        zmq.auth.create_certificates(str(directory), args.name)
+    finally:
+        os.umask(old_umask)
+    public.chmod(0o644)  # the public half is for sharing
     print(f"public key: {public}\nsecret key: {secret}")
     return 0
 

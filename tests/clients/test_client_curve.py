@@ -174,3 +174,32 @@ def test_keys_are_validated_at_construction():
         CurveKeys(server_public=b"~" * 40, client_public=public, client_secret=secret)
     with pytest.raises(ValueError, match="not the public key"):
         CurveKeys(server_public=other_public, client_public=other_public, client_secret=secret)
+
+
+def test_keygen_writes_the_secret_readable_by_its_owner_only_from_the_start(
+    tmp_path, monkeypatch, capsys
+):
+    """Issue 32 (9): the secret was written with the umask's mode, then chmod-ed."""
+    import os
+    import stat
+
+    from controller_server.cli import main
+
+    modes = {}
+    create = zmq.auth.create_certificates
+
+    def create_and_look(directory, name):  # the files as they are the instant they exist
+        paths = create(directory, name)
+        modes.update({Path(p).suffix: stat.S_IMODE(os.stat(p).st_mode) for p in paths})
+        return paths
+
+    monkeypatch.setattr(zmq.auth, "create_certificates", create_and_look)
+    old_umask = os.umask(0o022)  # a usual one: files readable by all
+    try:
+        assert main(["keygen", str(tmp_path), "--name", "robot"]) == 0
+    finally:
+        os.umask(old_umask)
+    assert modes[".key_secret"] == 0o600
+    assert stat.S_IMODE((tmp_path / "robot.key_secret").stat().st_mode) == 0o600
+    assert stat.S_IMODE((tmp_path / "robot.key").stat().st_mode) == 0o644
+    assert "secret key:" in capsys.readouterr().out
