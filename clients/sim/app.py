@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +55,12 @@ def run_scenarios(
     workers: int = 1,
     dask: str | None = None,
 ) -> list[dict[str, Any]]:
-    """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary table.
+    """Run each scenario, write ``<name>.png`` and ``report.json``, print a summary.
+
+    The summary is a table per kind of scenario (balance, walk, jump: each its own
+    columns), the scenarios' warnings (a push after the end, fewer than two contacts:
+    :func:`~clients.sim.scenario.scenario_warnings`), and a last line saying where
+    the report and the plots went.
 
     The scenarios run on a :class:`~clients.pool.RunPool` of ``workers``
     local processes (no more than there are scenarios), or on the Dask
@@ -106,6 +111,7 @@ def run_scenarios(
             tasks.interrupted = True
     reports = tasks.reports()
     _print_table(reports)
+    _print_written(output_dir, reports)
     if tasks.interrupted:
         raise KeyboardInterrupt
     return reports
@@ -184,27 +190,91 @@ class _ScenarioTasks:
             self.bar(len(self.done) / count, f"{len(self.done)}/{count} done")
 
 
+_Column = tuple[str, int, Callable[[dict[str, Any]], str]]
+"""A summary column: header, width and the text of a report's cell."""
+
+_COLUMNS: dict[str, list[_Column]] = {
+    "balance": [
+        ("CM exc. m", 10, lambda r: f"{r['com_excursion_m']:.3f}"),
+        ("COP in", 8, lambda r: f"{r['cop_strictly_inside_fraction']:.0%}"),
+        ("slip mm", 9, lambda r: f"{r['foot_slip_m'] * 1e3:.1f}"),
+    ],
+    "walk": [
+        ("distance m", 12, lambda r: f"{r['walking']['distance_m']:.2f}"),
+        ("speed m/s", 11, lambda r: f"{r['walking']['speed_m_per_s']:.2f}"),
+        ("steps", 7, lambda r: f"{r['walking']['step_count']}"),
+        ("slip mm", 9, lambda r: f"{r['walking']['foot_slip_m'] * 1e3:.1f}"),
+    ],
+    "jump": [
+        ("clearance m", 13, lambda r: f"{r['jump']['clearance_m']:.3f}"),
+        ("flight s", 10, lambda r: f"{r['jump']['flight_s']:.2f}"),
+        ("turn °", 8, lambda r: f"{round(r['jump']['turn_deg'])}"),  # never "-0"
+    ],
+}
+"""Per kind of scenario (``report["kind"]``), the columns between the result and the RTF."""
+
+
+def _result(report: dict[str, Any]) -> str:
+    """A run's outcome in a few words, in its kind's terms."""
+    if report["fell"]:
+        return f"fell {report['fall_time_s']:.2f} s"
+    if not report["complete"]:
+        return f"stopped {report['simulated_s']:.2f} s"
+    if report["kind"] == "walk" and "walking" in report:
+        return "walked" if report["walking"]["step_count"] else "no steps"
+    if report["kind"] == "jump" and "jump" in report:
+        if not report["jump"]["flight_s"]:
+            return "no flight"
+        return "landed" if report["jump"]["landed"] else "not landed"
+    return "stayed up"
+
+
 def _print_table(reports: list[dict[str, Any]]) -> None:
+    """One table per kind of scenario (balance, walk, jump), each with its own columns.
+
+    Balance: the largest horizontal CM excursion, the fraction of ticks with the COP
+    strictly inside the support polygon, the largest slide of a supporting sole; walk:
+    the distance, the speed from the first lift-off, the steps and the slide; jump: the
+    soles' clearance, the longest flight and the feet's turn. The model's notes come
+    before, the scenarios' warnings after.
+    """
     notes = {(r["scenario"], note) for r in reports for note in r.get("model_notes", [])}
     for scenario, note in sorted(notes):
         print(f"note ({scenario}): {note}")
     width = max([24, *(len(r["scenario"]) + 2 for r in reports)])
-    print(
-        f"{'scenario':<{width}}{'backend':<10}{'result':<16}{'CM exc. m':>10}{'COP in':>8}"
-        f"{'slip mm':>9}{'RTF':>7}"
-    )
-    for r in reports:
-        if r["fell"]:
-            result = f"fell {r['fall_time_s']:.2f} s"
-        elif not r["complete"]:
-            result = f"stopped {r['simulated_s']:.2f} s"
-        else:
-            result = "stayed up"
-        if "com_excursion_m" not in r:  # stopped before its first tick
-            print(f"{r['scenario']:<{width}}{r['backend']:<10}{result:<16}")
-            continue
+    kinds = list(dict.fromkeys(r["kind"] for r in reports))
+    for index, kind in enumerate(kinds):
+        columns = [*_COLUMNS[kind], ("RTF", 7, lambda r: f"{r['real_time_factor']:.2f}")]
+        if index:
+            print()
         print(
-            f"{r['scenario']:<{width}}{r['backend']:<10}{result:<16}{r['com_excursion_m']:>10.3f}"
-            f"{r['cop_strictly_inside_fraction']:>8.0%}{r['foot_slip_m'] * 1e3:>9.1f}"
-            f"{r['real_time_factor']:>7.2f}"
+            f"{'scenario':<{width}}{'backend':<10}{'result':<16}"
+            + "".join(f"{header:>{size}}" for header, size, _ in columns)
         )
+        for r in reports:
+            if r["kind"] != kind:
+                continue
+            row = f"{r['scenario']:<{width}}{r['backend']:<10}{_result(r):<16}"
+            if "com_excursion_m" in r:  # else stopped before its first tick
+                row += "".join(f"{cell(r):>{size}}" for _, size, cell in columns)
+            print(row.rstrip())
+    for r in reports:
+        for warning in r.get("warnings", []):
+            print(f"warning ({r['scenario']}): {warning}")
+
+
+def _print_written(output_dir: Path, reports: list[dict[str, Any]]) -> None:
+    """Where the run wrote: the report, then the plots (as ``poise demo`` says it)."""
+    plots = [
+        path
+        for r in reports
+        for path in (r.get("plot"), r.get("walking", {}).get("plot"))
+        if path is not None
+    ]
+    print(
+        f"report: {output_dir / 'report.json'}" + (f"; plots: {', '.join(plots)}" if plots else "")
+    )
+    for key, label in (("series", "series"), ("video", "videos")):
+        paths = [r[key] for r in reports if key in r]
+        if paths:
+            print(f"{label}: {', '.join(paths)}")

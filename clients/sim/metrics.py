@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 from clients.layout import joint_slices
 from clients.sim.model_file import describe_model
 from clients.sim.runner import RunRecord
+from clients.sim.scenario import Scenario, scenario_warnings
 
 __all__ = [
     "JOINT_GROUPS",
@@ -19,6 +20,7 @@ __all__ = [
     "base_estimate_errors",
     "compute_metrics",
     "jump_metrics",
+    "scenario_kind",
     "sole_and_com_series",
     "strictly_inside",
     "touchdowns",
@@ -224,10 +226,14 @@ def base_estimate_errors(record: RunRecord) -> dict[str, float]:
 def compute_metrics(record: RunRecord) -> dict[str, Any]:
     """The run's report: fall, CM excursion, tracking RMS, COP margin, foot slip, torques, speed.
 
-    A run stopped before its first tick reports only what it is and why it stopped.
+    Also its ``kind`` (:func:`scenario_kind`), whose summary the table prints (a walk's
+    ``walking``, a jump's ``jump``), and the scenario's ``warnings``
+    (:func:`~clients.sim.scenario.scenario_warnings`). A run stopped before its first tick
+    reports only what it is, its warnings and why it stopped.
     """
     outcome = {
         "scenario": record.scenario.name,
+        "kind": scenario_kind(record.scenario),
         "backend": record.scenario.backend,
         "controller": record.scenario.controller,
         "fell": record.fell,
@@ -237,6 +243,7 @@ def compute_metrics(record: RunRecord) -> dict[str, Any]:
         "stopped": record.stopped,
         "simulated_s": record.simulated_s,
         "model_notes": record.model_notes,
+        "warnings": scenario_warnings(record.scenario),
     }
     if not record.commands:
         return outcome
@@ -316,6 +323,18 @@ def touchdowns(
                 if time_s - released_at.pop(contact) >= SWING_MIN_S:
                     events.append((tick, contact))
     return events
+
+
+def scenario_kind(scenario: Scenario) -> str:
+    """What the scenario tests: ``"walk"``, ``"jump"`` or ``"balance"``.
+
+    The first behavior of the two it asks for (at start or in a parameter change), else
+    ``"balance"``: standing, pushes, motions on the spot.
+    """
+    for params in [scenario.params, *(change.params for change in scenario.param_changes)]:
+        if params.get("behavior") in ("walk", "jump"):
+            return str(params["behavior"])
+    return "balance"
 
 
 def asks_behavior(record: RunRecord, behavior: str) -> bool:

@@ -48,6 +48,7 @@ __all__ = [
     "initial_configuration",
     "initial_joint_positions",
     "load_scenario",
+    "scenario_warnings",
 ]
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
@@ -286,6 +287,38 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> Scenario:
             f"{scenario.imu.body!r}; {hint}bodies: {', '.join(bodies)}"
         )
     return scenario
+
+
+def scenario_warnings(scenario: Scenario) -> list[str]:
+    """What in ``scenario`` runs but does not test what it seems to, one sentence each.
+
+    A push that starts at or after the run's end (``duration_s``, e.g. shortened with
+    ``--duration``) is never applied; a robot with fewer than two contacts (a URDF in which
+    one foot was found) stands on one foot, so staying up is not a biped's balance. Neither
+    stops the run: the summary and the report say so.
+    """
+    warnings = []
+    late = [
+        f"pushes[{index}] at {push.start_s:g} s"
+        for index, push in enumerate(scenario.pushes)
+        if push.start_s >= scenario.duration_s - 1e-9
+    ]
+    if late:
+        warnings.append(
+            f"push{'es' if len(late) > 1 else ''} never applied, starting at or after the "
+            f"run's end ({scenario.duration_s:g} s): {', '.join(late)}; lengthen duration_s "
+            "(--duration)"
+        )
+    contacts = describe_model(
+        scenario.model, contacts=scenario.contacts, keyframe=scenario.keyframe
+    ).contacts
+    if len(contacts) < 2:
+        warnings.append(
+            f"{scenario.model} has {len(contacts)} contact "
+            f"({', '.join(contact.name for contact in contacts)}): not a biped on two feet, so "
+            "staying up says little of its balance; name both feet (contacts, --contacts)"
+        )
+    return warnings
 
 
 def _resolve_push_bodies(name: str, scenario: Scenario, bodies: list[str]) -> Scenario:
