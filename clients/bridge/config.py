@@ -63,7 +63,8 @@ class BridgeConfigError(PoiseError, ValueError):
 
 
 class _Record(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # NaN and infinity are never a setting: refused by name, like a value out of range
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class BridgeSettings(_Record):
@@ -293,6 +294,12 @@ class BridgeConfig(_Record):
 
     @model_validator(mode="after")
     def _imu_table(self) -> BridgeConfig:
+        steps = self.emulation.physics_rate_hz / self.bridge.rate_hz
+        if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
+            raise ValueError(
+                f"emulation.physics_rate_hz ({self.emulation.physics_rate_hz:g}) must be a whole "
+                f"multiple of bridge.rate_hz ({self.bridge.rate_hz:g}): physics steps per tick"
+            )
         if self.imu is not None and self.bridge.base_state != "imu":
             raise ValueError(
                 f'an [imu] table is for base_state = "imu" (this map has base_state = '
@@ -329,17 +336,23 @@ def load_bridge_config(path: str | Path) -> BridgeConfig:
     """Read and validate a bridge file.
 
     Raises:
-        BridgeConfigError: No such file, not TOML, an unknown key (with the
-            closest known one), a value out of range, a joint on a bus that
-            does not exist, or two actuators with one id on one bus.
+        BridgeConfigError: No such file, not text, not TOML, an unknown key
+            (with the closest known one), a value out of range or not finite,
+            a physics rate that is not a whole multiple of the loop's, a joint
+            on a bus that does not exist, or two actuators with one id on one bus.
     """
     path = Path(path)
     if not path.is_file():
         raise BridgeConfigError(f"no bridge file {str(path)!r}")
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise BridgeConfigError(f"bridge file {str(path)!r} is not valid TOML: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise BridgeConfigError(
+            f"bridge file {str(path)!r} is not text (byte {exc.start} is not UTF-8): "
+            "give the TOML map (see examples/bridge/)"
+        ) from None
     try:
         return BridgeConfig.model_validate(data)
     except ValidationError as exc:

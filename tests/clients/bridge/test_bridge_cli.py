@@ -38,12 +38,15 @@ def test_an_emulated_run_prints_timing_and_links_and_writes_its_report(tmp_path,
     assert "emulated robot: stayed up over 0.50 s simulated" in run.stdout
     assert "left_knee" in run.stdout and "loop: 250 ticks" in run.stdout
     data = json.loads(report.read_text())
-    assert data["ticks"] == 250 and data["commands"] == 251 and data["latches"] == []
+    # every tick's state is answered in time or counted late (a busy machine: issue 33)
+    assert data["ticks"] == 250 and data["commands"] + data["server_timeouts"] == 251
+    assert data["server_timeouts"] <= 0.05 * 250 and data["latches"] == []
     assert len(data["links"]) == 22 and data["emulation"]["fell"] is False
     info = poise("log", "info", str(log))  # the session was recorded like any client's
     assert info.returncode == 0, info.stderr
     assert re.search(r"state sent\s+251\n", info.stdout), info.stdout
-    assert re.search(r"command received\s+251\n", info.stdout), info.stdout
+    received = int(re.search(r"command received\s+(\d+)\n", info.stdout).group(1))
+    assert data["commands"] <= received <= 251, info.stdout
 
 
 def test_estop_typed_on_stdin_holds_safe_disables_and_exits_1(server):

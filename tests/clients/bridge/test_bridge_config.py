@@ -70,6 +70,36 @@ def test_a_typo_gets_the_closest_key_of_its_own_table(tmp_path):
         load_bridge_config(path)
 
 
+MIT_KNEE = '[buses.a]\nprotocol = "mit"\n[joints.knee]\nbus = "a"\nid = 1\n'
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (MIT_KNEE + "gear_ratio = inf\n", r"joints.knee.gear_ratio.*finite"),
+        (MIT_KNEE + "zero_offset_rad = nan\n", r"joints.knee.zero_offset_rad.*finite"),
+        ("[bridge]\nrate_hz = inf\n" + MIT_KNEE, r"bridge.rate_hz"),
+        (
+            "[bridge]\nrate_hz = 500\n[emulation]\nphysics_rate_hz = 2100\n" + MIT_KNEE,
+            r"physics_rate_hz \(2100\) must be a whole multiple of bridge.rate_hz \(500\)",
+        ),
+    ],
+    ids=["infinite gear", "nan offset", "infinite rate", "physics rate not a multiple"],
+)
+def test_numbers_a_map_cannot_mean_are_refused_in_one_line(tmp_path, text, expected):
+    """Issue 32 (10): these passed validation, then failed on the bus or in the emulator."""
+    with pytest.raises(BridgeConfigError, match=expected) as error:
+        load_bridge_config(write(tmp_path, text))
+    assert "\n" not in str(error.value)
+
+
+def test_a_binary_file_is_not_a_map(tmp_path):
+    path = tmp_path / "map.toml"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe")
+    with pytest.raises(BridgeConfigError, match=r"is not text .* not UTF-8"):
+        load_bridge_config(path)
+
+
 def test_a_joint_on_a_missing_bus_and_a_shared_id_are_refused():
     with pytest.raises(ValueError, match="no such bus; buses: can0"):
         config(knee={"bus": "can1", "id": 1})
