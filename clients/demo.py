@@ -47,7 +47,4 @@ def run_demo(
         video=video,
         observer=observer,
     )
-    print(f"report: {output_dir / 'report.json'}; plots: {', '.join(r['plot'] for r in reports)}")
-    if video:
-        print(f"videos: {', '.join(r['video'] for r in reports if 'video' in r)}")
     return 1 if any(r["fell"] or not r["complete"] for r in reports) else 0

@@ -27,6 +27,11 @@ def test_demo_survives_the_thesis_pushes_and_writes_readable_plots_and_videos(se
         timeout_s=600,
     )
     assert result.returncode == 0, result.stdout + result.stderr
+    wrote = [line for line in result.stdout.splitlines() if line.startswith("report: ")]
+    assert wrote == [
+        f"report: {tmp_path / 'report.json'}; plots: "
+        + ", ".join(str(tmp_path / f"{name}.png") for name in DEMO_SCENARIOS)
+    ]
 
     reports = json.loads((tmp_path / "report.json").read_text())
     assert [r["scenario"] for r in reports] == list(DEMO_SCENARIOS)
