@@ -3,12 +3,17 @@
 Each frame poses the robot at the last tick at or before the frame's time
 (``fps`` frames per second of simulated time: the 1 kHz ticks subsampled),
 adds the tick's overlays (:mod:`clients.visual.overlays`) to MuJoCo's scene
-as user geoms — the push as a red arrow, the COP as a green and the CMP as
-a blue disc on the ground, the support polygon in yellow, a floor grid every
-``GRID_SPACING_M`` so that motion shows — and burns the caption into the
-top of the image. The camera looks at the base from the robot's left,
-following it over the floor (its height stays put). Frames are encoded to
-H.264 (yuv420p) by PyAV, which ships its own FFmpeg.
+as user geoms — the push as a red arrow, the support polygon in yellow, a
+floor grid every ``GRID_SPACING_M`` on a brown floor (the rendered scene's
+only: the grey robot stands out) so that motion shows — then draws the COP
+(a green disc) and the CMP (a blue ring around it, as the two often
+coincide) over the image where they lie on the ground, outlined in white:
+on top, since the feet would hide them, and sized to the robot
+(``MARKER_RADIUS_PER_HEIGHT`` of its standing height, seen at their
+distance). The caption is burnt into the top of the image. The camera looks
+at the base from the robot's right, a little behind, following it over the
+floor (its height stays put), from a distance that fits the robot's height.
+Frames are encoded to H.264 (yuv420p) by PyAV, which ships its own FFmpeg.
 
 Rendering needs headless OpenGL: call :func:`~clients.visual.gl.choose_headless_gl`
 before anything imports ``mujoco``.
@@ -19,6 +24,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -32,9 +38,11 @@ __all__ = [
     "ARROW_RGBA",
     "CMP_RGBA",
     "COP_RGBA",
+    "FLOOR_RGBA",
     "VIDEO_FPS",
     "FrameRenderer",
     "frame_ticks",
+    "project_to_pixels",
     "write_video",
 ]
 
@@ -47,16 +55,23 @@ COP_RGBA = (0.1, 0.85, 0.2, 1.0)
 """Centre of pressure: green."""
 CMP_RGBA = (0.15, 0.45, 1.0, 1.0)
 """Centroidal moment pivot: blue."""
+MARKER_OUTLINE_RGB = (255, 255, 255)
+"""Around the COP and CMP markers, so they show on the floor and on the robot alike."""
 POLYGON_RGBA = (1.0, 0.85, 0.1, 1.0)
-GRID_RGBA = (0.55, 0.57, 0.62, 1.0)
+FLOOR_RGBA = (0.42, 0.29, 0.18, 1.0)
+"""The rendered floor: brown, against the light grey robot (the model's own is unchanged)."""
+GRID_RGBA = (0.74, 0.62, 0.48, 1.0)
 GRID_SPACING_M = 0.5
 GRID_HALF_LINES = 8
-CAMERA_DISTANCE_M = 2.8
+CAMERA_DISTANCE_PER_HEIGHT = 1.7
+"""Camera distance per metre of the robot's standing height: the whole robot in view."""
 CAMERA_AZIMUTH_DEG = 75.0
 """From the robot's right, a little behind: pushes along x cross the picture."""
 CAMERA_ELEVATION_DEG = -20.0
-FLOOR_RGBA = (0.78, 0.8, 0.84, 1.0)
-MARKER_RADIUS_M = 0.04
+MARKER_RADIUS_PER_HEIGHT = 0.03
+"""COP disc radius per metre of the robot's standing height (the CMP ring is 1.6 times it)."""
+CMP_RING_RADIUS = 1.6
+"""The CMP ring's radius per COP disc radius."""
 
 
 def frame_ticks(track: Track, fps: float = VIDEO_FPS) -> list[int]:
@@ -93,12 +108,23 @@ class FrameRenderer:
         model.vis.headlight.diffuse[:] = 0.6
         self._renderer = open_renderer(model, height, width)
         self._options = mujoco.MjvOption()
+        robot_height_m = self._standing_height_m()
         self._camera = mujoco.MjvCamera()
         self._camera.type = mujoco.mjtCamera.mjCAMERA_FREE
-        self._camera.distance = CAMERA_DISTANCE_M
+        self._camera.distance = CAMERA_DISTANCE_PER_HEIGHT * robot_height_m
         self._camera.azimuth = CAMERA_AZIMUTH_DEG
         self._camera.elevation = CAMERA_ELEVATION_DEG
-        self._look_height_m = 0.8 * float(track.welcome.standing_position_base_in_world[2])
+        self._look_height_m = 0.5 * robot_height_m
+        self.marker_radius_m = MARKER_RADIUS_PER_HEIGHT * robot_height_m
+
+    def _standing_height_m(self) -> float:
+        """The top of the robot's geoms (their bounding spheres) in its first state (m)."""
+        self.scene.pose(self.track.states[0])
+        model, data = self.scene.model, self.scene.data
+        robot = model.geom_bodyid != 0
+        if not robot.any():
+            return float(self.track.welcome.standing_position_base_in_world[2])
+        return float(np.max(data.geom_xpos[robot, 2] + model.geom_rbound[robot]))
 
     def close(self) -> None:
         """Free the OpenGL context."""
@@ -124,6 +150,7 @@ class FrameRenderer:
         _add_grid(scene, base[:2])
         _add_overlays(scene, overlays)
         image = self._renderer.render()
+        image = _with_markers(image, scene, overlays, self.marker_radius_m)
         return _with_caption(image, overlays.caption)
 
 
@@ -221,18 +248,93 @@ def _add_overlays(scene: mujoco.MjvScene, overlays: TickOverlays) -> None:
     polygon = overlays.support_polygon
     for start, end in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
         _add_geom(scene, mujoco.mjtGeom.mjGEOM_CAPSULE, POLYGON_RGBA, connect=(start, end, 0.008))
-    for point, rgba in (
-        (overlays.center_of_pressure, COP_RGBA),
-        (overlays.centroidal_moment_pivot, CMP_RGBA),
-    ):
-        if point is not None:
-            _add_geom(
-                scene,
-                mujoco.mjtGeom.mjGEOM_CYLINDER,
-                rgba,
-                size=(MARKER_RADIUS_M, 0.004, 0.0),
-                position=point,
-            )
+
+
+def project_to_pixels(
+    scene: mujoco.MjvScene, points_in_world: np.ndarray, width: int, height: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where world points fall in the rendered image, and their depth along the view.
+
+    The pinhole of MuJoCo's OpenGL camera (``scene.camera``, both eyes averaged, as
+    ``mjr_render`` sets it up: the frustum's height from the scene, its width from the
+    image's aspect).
+
+    Args:
+        scene: The scene as last updated (its camera).
+        points_in_world: ``(n, 3)`` points (m).
+        width: Image width (pixels).
+        height: Image height (pixels).
+
+    Returns:
+        ``(n, 2)`` pixel coordinates (column, row; from the top left corner) and ``(n,)``
+        depths in front of the camera (m; not positive: behind it).
+    """
+    camera = mujoco.mjv_averageCamera(scene.camera[0], scene.camera[1])
+    forward, up = np.asarray(camera.forward, dtype=float), np.asarray(camera.up, dtype=float)
+    right = np.cross(forward, up)
+    relative = np.atleast_2d(np.asarray(points_in_world, dtype=float)) - camera.pos
+    depth = relative @ forward
+    near = camera.frustum_near
+    safe = np.where(depth > 1e-9, depth, np.nan)
+    x_near, y_near = near * (relative @ right) / safe, near * (relative @ up) / safe
+    bottom, top = camera.frustum_bottom, camera.frustum_top
+    half_width = 0.5 * width / height * (top - bottom)
+    column = (x_near - camera.frustum_center + half_width) / (2 * half_width) * width
+    row = (top - y_near) / (top - bottom) * height
+    return np.column_stack([column, row]), depth
+
+
+def _with_markers(
+    image: np.ndarray, scene: mujoco.MjvScene, overlays: TickOverlays, radius_m: float
+) -> np.ndarray:
+    """``image`` with the COP (a disc) and the CMP (a ring) drawn over it, outlined in white.
+
+    A marker of ``radius_m`` on the ground, as large as a sphere of that radius would
+    look there (not foreshortened into a sliver by the camera's slant).
+    """
+    height, width = image.shape[:2]
+    markers = [
+        (point, ring)
+        for point, ring in (
+            (overlays.centroidal_moment_pivot, True),
+            (overlays.center_of_pressure, False),
+        )
+        if point is not None
+    ]  # the ring first: a COP inside it stays whole
+    if not markers:
+        return image
+    from PIL import Image, ImageDraw
+
+    picture = Image.fromarray(image)
+    draw = ImageDraw.Draw(picture)
+    camera = scene.camera[0]
+    pixels_per_m_at_1_m = (
+        height * camera.frustum_near / (camera.frustum_top - camera.frustum_bottom)
+    )
+    centers, depths = project_to_pixels(scene, np.array([p for p, _ in markers]), width, height)
+    for (_, ring), center, depth in zip(markers, centers, depths, strict=True):
+        if not depth > 0:
+            continue
+        radius = pixels_per_m_at_1_m * radius_m / depth
+        if ring:
+            radius *= CMP_RING_RADIUS
+            thickness = max(2, round(0.35 * radius))
+            _circle(draw, center, radius + 1.5, outline=MARKER_OUTLINE_RGB, width=thickness + 3)
+            _circle(draw, center, radius, outline=_rgb(CMP_RGBA), width=thickness)
+        else:
+            _circle(draw, center, radius + 1.5, fill=MARKER_OUTLINE_RGB)
+            _circle(draw, center, radius, fill=_rgb(COP_RGBA))
+    return np.asarray(picture)
+
+
+def _circle(draw: Any, center: np.ndarray, radius: float, **style: Any) -> None:
+    """A circle of ``radius`` pixels about ``center`` (PIL's ``ellipse`` styles)."""
+    column, row = center
+    draw.ellipse((column - radius, row - radius, column + radius, row + radius), **style)
+
+
+def _rgb(rgba: tuple[float, float, float, float]) -> tuple[int, int, int]:
+    return tuple(round(255 * channel) for channel in rgba[:3])  # type: ignore[return-value]
 
 
 def _with_caption(image: np.ndarray, caption: str) -> np.ndarray:
