@@ -20,7 +20,6 @@ once the robot has fallen.
 
 from __future__ import annotations
 
-import difflib
 import os
 import time
 from dataclasses import dataclass, field
@@ -38,6 +37,7 @@ from clients.sim.model_file import describe_model, hello_model
 from clients.sim.scenario import Scenario, controller_params, initial_joint_positions
 from clients.state import RobotState
 from clients.track import RunObserver, Track
+from protocol.errors import did_you_mean
 from protocol.messages import Command, ContactSpec, Diagnostics, Welcome
 
 __all__ = [
@@ -125,8 +125,7 @@ def standing_state(
     slices = joint_slices(joints)
     for name, value in joint_overrides.items():
         if name not in slices:
-            close = difflib.get_close_matches(name, slices, n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
+            hint = did_you_mean(name, slices)
             raise ScenarioError(
                 f"initial_joint_position: {model_label or welcome.model_name} has no joint "
                 f"{name!r}; {hint}joints: {', '.join(slices)}"

@@ -17,7 +17,6 @@ into each robot's joints, bodies and angular momentum when it loads.
 
 from __future__ import annotations
 
-import difflib
 import tomllib
 from pathlib import Path
 from types import UnionType
@@ -35,6 +34,7 @@ from clients.sim.robot_terms import (
     resolve_body,
     vertical_inertia,
 )
+from protocol.errors import did_you_mean
 from protocol.messages import ContactSpec
 
 __all__ = [
@@ -280,8 +280,7 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> Scenario:
     scenario = _resolve_push_bodies(str(name_or_path), scenario, bodies)
     _check_initial_pose(str(name_or_path), scenario)
     if scenario.imu.body and bodies and scenario.imu.body not in bodies:
-        close = difflib.get_close_matches(scenario.imu.body, bodies, n=1)
-        hint = f"did you mean {close[0]!r}? " if close else ""
+        hint = did_you_mean(scenario.imu.body, bodies)
         raise ScenarioError(
             f"scenario {str(name_or_path)!r}: imu.body: {scenario.model} has no body "
             f"{scenario.imu.body!r}; {hint}bodies: {', '.join(bodies)}"
@@ -330,8 +329,7 @@ def _resolve_push_bodies(name: str, scenario: Scenario, bodies: list[str]) -> Sc
     for index, push in enumerate(scenario.pushes):
         body = resolve_body(description, push.body) if bodies else push.body
         if body is None:
-            close = difflib.get_close_matches(push.body, bodies, n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
+            hint = did_you_mean(push.body, bodies)
             raise ScenarioError(
                 f"scenario {name!r}: pushes[{index}].body: {scenario.model} has no body "
                 f"{push.body!r}; {hint}bodies: {', '.join(bodies)} (or `trunk`, `root`)"
@@ -347,8 +345,7 @@ def _check_initial_pose(name: str, scenario: Scenario) -> None:
     ).joint_names
     for joint in scenario.initial_joint_position:
         if joint not in joints:
-            close = difflib.get_close_matches(joint, joints, n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
+            hint = did_you_mean(joint, joints)
             raise ScenarioError(
                 f"scenario {name!r}: initial_joint_position: {scenario.model} has no joint "
                 f"{joint!r}; {hint}joints: {', '.join(joints)}"
@@ -451,9 +448,8 @@ def _explain_one(details: Any, root: type[BaseModel]) -> str:
     where = ".".join(str(part) for part in location)
     if details["type"] == "extra_forbidden":
         known = list(_record_at(root, location[:-1]).model_fields)
-        close = difflib.get_close_matches(str(location[-1]), known, n=1)
-        hint = f"did you mean {close[0]!r}?" if close else f"known keys: {', '.join(known)}"
-        return f"unknown key {where!r}; {hint}"
+        hint = did_you_mean(str(location[-1]), known).rstrip()
+        return f"unknown key {where!r}; {hint or 'known keys: ' + ', '.join(known)}"
     if location[:1] == ("initial_joint_position",) and len(location) == 2:
         return (
             f"{where} = {details['input']!r}: give a list with one number per coordinate of "
