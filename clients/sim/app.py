@@ -11,7 +11,7 @@ from clients.client import CurveKeys
 from clients.pool import RunPool, Task
 from clients.progress import ProgressBar
 from clients.server_process import ServerProcess
-from clients.sim.metrics import compute_metrics
+from clients.sim.metrics import compute_metrics, start_pose_note
 from clients.sim.output import OutputDirectory
 from clients.sim.plots import plot_run, plot_walk_paths
 from clients.sim.runner import RunRecord, run_scenario
@@ -239,6 +239,7 @@ def _print_table(reports: list[dict[str, Any]]) -> None:
     before, the scenarios' warnings after.
     """
     notes = {(r["scenario"], note) for r in reports for note in r.get("model_notes", [])}
+    notes |= {(r["scenario"], note) for r in reports if (note := start_pose_note(r))}
     for scenario, note in sorted(notes):
         print(f"note ({scenario}): {note}")
     width = max([24, *(len(r["scenario"]) + 2 for r in reports)])
