@@ -12,14 +12,24 @@ Beside each answer the sweep gives the robot's own no-step bound
 (:func:`~clients.sim.robot_terms.no_step_bound`): the largest impulse
 (N·s) it could take on both feet without stepping, from its standing pose
 and soles, and the impulse survived (force × duration) as a share of it.
+
+A sweep writes its JSON and picture (:func:`write_sweep`) after every finished
+bisection, each replaced in one step, and once more when it ends, however it
+ends (Ctrl-C, SIGTERM, a trial without an answer): a stopped sweep keeps every
+trial that ran, its JSON says ``"complete": false``.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import math
-from collections.abc import Mapping
+import os
+import signal
+import threading
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,6 +58,7 @@ __all__ = [
     "sweep_entries",
     "sweep_push",
     "trial_scenario",
+    "write_sweep",
 ]
 
 ANGULAR_OFF: dict[str, Any] = {"angular_momentum_gain": 0.0, "weight_angular_momentum": 0.0}
@@ -251,10 +262,26 @@ class Sweep:
     bisections: dict[str, dict[str, Bisection]]
     bounds: dict[str, NoStepBound] = field(default_factory=dict)
 
+    @property
+    def complete(self) -> bool:
+        """True once every bisection is :attr:`~Bisection.done`."""
+        return all(b.done for row in self.bisections.values() for b in row.values())
+
+    def unfinished(self) -> dict[str, list[str]]:
+        """Controller label → direction names of its bisections not done (only labels with any)."""
+        unfinished = {
+            label: [name for name, b in row.items() if not b.done]
+            for label, row in self.bisections.items()
+        }
+        return {label: names for label, names in unfinished.items() if names}
+
     def largest_survived_N(self) -> dict[str, dict[str, float]]:
-        """Controller label → direction name → largest force survived (N)."""
+        """Controller label → direction name → largest force survived (N), of finished bisections.
+
+        A bisection not :attr:`~Bisection.done` has no answer yet: its direction is left out.
+        """
         return {
-            label: {name: b.largest_survived_N for name, b in row.items()}
+            label: {name: b.largest_survived_N for name, b in row.items() if b.done}
             for label, row in self.bisections.items()
         }
 
@@ -312,9 +339,17 @@ class Sweep:
         return lines
 
     def to_json(self) -> dict[str, Any]:
-        """The sweep as JSON: the push, and per controller and direction the trials and answer."""
+        """The sweep as JSON: the push, and per controller and direction the trials and answer.
+
+        ``complete`` is false until every bisection is done (a sweep written as it runs, or
+        stopped); the answers (``largest_survived_N`` and what follows from it) are those of
+        the finished bisections, ``unfinished`` names the others, and ``trials`` has every
+        trial that ran, those of an unfinished bisection too.
+        """
         return {
             "scenario": self.scenario,
+            "complete": self.complete,
+            "unfinished": self.unfinished(),
             "push": self.push.model_dump(mode="json", exclude={"force_in_world_N"}),
             "directions": {name: list(xyz) for name, xyz in self.directions.items()},
             "largest_survived_N": self.largest_survived_N(),
@@ -341,13 +376,24 @@ class Sweep:
 
 
 class _SweepTasks:
-    """The pool's task source: each unfinished pair's next trial, the table as rows complete."""
+    """The pool's task source: each unfinished pair's next trial, the table as rows complete.
 
-    def __init__(self, sweep: Sweep, bases: dict[str, Scenario], settle_s: float, bar: ProgressBar):
+    ``bisection_done`` is called after each bisection finishes (its row printed, if complete).
+    """
+
+    def __init__(
+        self,
+        sweep: Sweep,
+        bases: dict[str, Scenario],
+        settle_s: float,
+        bar: ProgressBar,
+        bisection_done: Callable[[], object] | None = None,
+    ):
         self.sweep = sweep
         self.bases = bases
         self.settle_s = settle_s
         self.bar = bar
+        self.bisection_done = bisection_done
         self.waiting = [(label, name) for label in sweep.bisections for name in sweep.directions]
         header = sweep.table()  # no row is done yet
         for line in header:
@@ -373,6 +419,8 @@ class _SweepTasks:
         for line in self.sweep.table()[self.printed :]:
             self.bar.print(line)
             self.printed += 1
+        if bisection.done and self.bisection_done is not None:
+            self.bisection_done()
         self._progress()
 
     def _progress(self) -> None:
@@ -426,7 +474,11 @@ def sweep_controllers(
     Each row is printed once its controller's directions are done. With
     ``output_dir``, writes ``sweep_<scenario>.json`` (every trial) and
     ``sweep_<scenario>.png`` (survived/fell over direction × force, a polar
-    plot per controller, :func:`~clients.sim.sweep_plot.plot_sweep`).
+    plot per controller, :func:`~clients.sim.sweep_plot.plot_sweep`) after
+    every finished bisection and once more at the end, also when the sweep
+    stops early (Ctrl-C, SIGTERM, a failed trial: the exception propagates
+    once they are written), so a stopped sweep keeps what ran, with
+    ``"complete": false`` (:func:`write_sweep`).
 
     The push's body is the robot's (``chest`` on a robot without one: its trunk,
     :func:`~clients.sim.robot_terms.resolve_body`), checked before the first trial.
@@ -447,16 +499,91 @@ def sweep_controllers(
         },
         bounds=sweep_bounds(first, directions),
     )
-    with ProgressBar(f"sweep {sweep.scenario}", enabled=progress) as bar:
-        pool.run(_SweepTasks(sweep, bases, settle_s, bar))
+    save = None
     if output_dir is not None:
-        from clients.sim.sweep_plot import plot_sweep
+        from clients.sim.sweep_plot import pyplot
 
-        stem = output_dir / f"sweep_{sweep.scenario}"
-        stem.with_suffix(".json").write_text(json.dumps(sweep.to_json(), indent=2))
-        plot_sweep(sweep, stem.with_suffix(".png"))
-        print(f"sweep: {stem.with_suffix('.json')}; picture: {stem.with_suffix('.png')}")
+        pyplot()  # now, not halfway through when a Ctrl-C comes
+        save = functools.partial(write_sweep, sweep, output_dir)
+    try:
+        with ProgressBar(f"sweep {sweep.scenario}", enabled=progress) as bar:
+            pool.run(_SweepTasks(sweep, bases, settle_s, bar, save))
+    finally:  # however the sweep ends, what ran is kept (a KeyboardInterrupt still propagates)
+        if output_dir is not None:
+            json_path, png_path = _sweep_paths(sweep, output_dir)
+            stopped = ""
+            if not sweep.complete:  # complete: written as its last bisection finished
+                write_sweep(sweep, output_dir)
+                pairs = [b for row in sweep.bisections.values() for b in row.values()]
+                finished = sum(b.done for b in pairs)
+                stopped = f" (stopped: {finished} of {len(pairs)} bisections finished)"
+            print(f"sweep{stopped}: {json_path}; picture: {png_path}", flush=True)
     return sweep
+
+
+def _sweep_paths(sweep: Sweep, output_dir: Path) -> tuple[Path, Path]:
+    """``output_dir/sweep_<scenario>.json`` and ``.png``."""
+    stem = output_dir / f"sweep_{sweep.scenario}"
+    return stem.with_suffix(".json"), stem.with_suffix(".png")
+
+
+def write_sweep(sweep: Sweep, output_dir: Path) -> tuple[Path, Path]:
+    """Write ``sweep_<scenario>.json`` and ``sweep_<scenario>.png`` into ``output_dir``.
+
+    Each is written under a temporary name beside it, then renamed over the old one
+    (:func:`os.replace`). Ctrl-C and SIGTERM wait until both are written (about a second:
+    the picture), so the two always show the same trials; then they stop the sweep.
+
+    Returns:
+        The paths of the JSON and the picture.
+    """
+    from clients.sim.sweep_plot import plot_sweep
+
+    json_path, png_path = _sweep_paths(sweep, output_dir)
+    partial = json_path.with_suffix(".json.partial")
+    with _interrupts_held():
+        try:
+            partial.write_text(json.dumps(sweep.to_json(), indent=2))
+            os.replace(partial, json_path)
+            partial = png_path.with_suffix(".png.partial")
+            plot_sweep(sweep, partial)
+            os.replace(partial, png_path)
+        finally:
+            partial.unlink(missing_ok=True)  # gone once renamed
+    return json_path, png_path
+
+
+@contextmanager
+def _interrupts_held() -> Iterator[None]:
+    """Ctrl-C and SIGTERM wait for the block: their handlers run once it ends.
+
+    A KeyboardInterrupt raised inside matplotlib can be lost (the sweep ran on) or turned
+    into another error (seen: a ``TypeError`` from one of its compiled functions), and a
+    file left half-written. Blocking the signals would not do: the kernel hands them to
+    another thread (a process pool's), and Python still runs the handler in the main one.
+    So the handlers are swapped for one that notes the signal. Python runs signal handlers
+    in the main thread only: elsewhere this holds nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+
+    def hold(signum: int, _frame: object) -> None:
+        held.append(signum)
+
+    previous = {signum: signal.signal(signum, hold) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+        if held:  # as it would have been handled in the block
+            handler = previous[held[0]]
+            if callable(handler):
+                handler(held[0], None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(held[0])
 
 
 def _push_body(scenario: Scenario, body: str) -> str:

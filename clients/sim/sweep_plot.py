@@ -8,18 +8,23 @@ red cross if it fell; the largest force survived per direction is joined by
 a line. The radius ends a little beyond the largest answer: the first
 trials (2000 N, 1000 N, …) all fell and would squeeze the answers into the
 centre, so trials beyond the edge are drawn on it as open markers.
+
+A sweep still running or stopped is drawn as far as it got: every trial that
+ran, the answer only of the finished bisections, and the titles say how many
+are finished.
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from clients.sim.sweep import Sweep
 
-__all__ = ["plot_sweep", "push_azimuth_rad"]
+__all__ = ["plot_sweep", "push_azimuth_rad", "pyplot"]
 
 EDGE_MARGIN = 1.5
 """The radius ends at this multiple of the largest force survived (rounded up to 50 N)."""
@@ -33,14 +38,28 @@ def push_azimuth_rad(direction: tuple[float, float, float]) -> float:
     return math.atan2(direction[1], direction[0])
 
 
-def plot_sweep(sweep: Sweep, path: Path) -> None:
-    """Plot ``sweep`` to ``path`` (PNG): a polar panel per controller (module docstring)."""
+def pyplot() -> ModuleType:
+    """``matplotlib.pyplot`` on the Agg backend, imported on first use (a second or so).
+
+    A sweep imports it before its first trial: a Ctrl-C in the middle of an import
+    leaves the module half made, and the sweep could not draw what it ran.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    answers = [b.largest_survived_N for row in sweep.bisections.values() for b in row.values()]
+    return plt
+
+
+def plot_sweep(sweep: Sweep, path: Path) -> None:
+    """Plot ``sweep`` to ``path`` (PNG, whatever its suffix): a polar panel per controller.
+
+    See the module docstring.
+    """
+    plt = pyplot()
+    pairs = [b for row in sweep.bisections.values() for b in row.values()]
+    answers = [b.largest_survived_N for b in pairs if b.done]
     edge_N = 50.0 * math.ceil(max(50.0, EDGE_MARGIN * max(answers, default=0.0)) / 50.0)
     count = len(sweep.bisections)
     columns = min(count, 2)
@@ -83,12 +102,13 @@ def plot_sweep(sweep: Sweep, path: Path) -> None:
                     label=f"{name} beyond {edge_N:.0f} N ({len(beyond)})",
                     zorder=3,
                 )
-        order = sorted(row, key=lambda name: azimuths[name])
+        order = sorted((n for n in row if row[n].done), key=lambda name: azimuths[name])
         angles = [azimuths[name] for name in order]
         forces = [row[name].largest_survived_N for name in order]
-        if len(order) > 2:  # a closed outline around the robot
+        if len(order) > 2 and len(order) == len(row):  # a closed outline around the robot
             angles, forces = [*angles, angles[0]], [*forces, forces[0]]
-        ax.plot(angles, forces, color="tab:green", linewidth=1.2, label="largest survived")
+        if order:
+            ax.plot(angles, forces, color="tab:green", linewidth=1.2, label="largest survived")
         for name in order:
             ax.annotate(
                 f"{row[name].largest_survived_N:.0f} N",
@@ -105,12 +125,22 @@ def plot_sweep(sweep: Sweep, path: Path) -> None:
             text.set_horizontalalignment(
                 "right" if across < -0.3 else "left" if across > 0.3 else "center"
             )
-        ax.set_title(label, fontsize=10, pad=18)
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), fontsize=7, ncol=2)
+        title = label
+        if len(order) < len(row):
+            title += f"\n({len(order)} of {len(row)} directions finished)"
+        ax.set_title(title, fontsize=10, pad=18)
+        if ax.get_legend_handles_labels()[0]:  # a controller not begun has nothing to name
+            ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), fontsize=7, ncol=2)
     push = sweep.push
+    incomplete = ""
+    if not sweep.complete:
+        finished = sum(b.done for b in pairs)
+        incomplete = f"; incomplete: {finished} of {len(pairs)} bisections finished"
     figure.suptitle(
         f"push sweep: {sweep.scenario}, {push.duration_s:g} s on the {push.body} at "
-        f"{push.start_s:g} s\nforce (N) by direction, seen from above (x forward, up)"
+        f"{push.start_s:g} s{incomplete}\nforce (N) by direction, seen from above (x forward, up)"
     )
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
+    try:
+        figure.savefig(path, dpi=100, format="png")
+    finally:
+        plt.close(figure)
