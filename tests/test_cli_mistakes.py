@@ -180,6 +180,11 @@ MISTAKES = [
         ["argument --push-duration: -0.1 is not a finite number above zero"],
     ),
     (
+        "a sweep's push of no direction",
+        lambda d: sim(d, "stand", "--sweep-push", "--push-direction", "0", "0", "0"),
+        ["--push-direction 0 0 0: give a direction with a horizontal part"],
+    ),
+    (
         "a file where the output directory goes",
         lambda d: ["demo", "--output", str(existing_file(d))],
         ["poise demo: --output", "a file is in the way", "choose another --output"],

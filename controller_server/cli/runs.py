@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from controller_server.cli.common import (
@@ -80,6 +81,12 @@ def _sim(args: argparse.Namespace) -> int:
     )
     directions = SWEEP_DIRECTIONS
     if args.push_direction:
+        for x, y, z in args.push_direction:
+            if not math.isfinite(x * x + y * y + z * z) or x * x + y * y < 1e-12:
+                raise UsageError(
+                    f"--push-direction {x:g} {y:g} {z:g}: give a direction with a horizontal "
+                    "part (finite numbers), e.g. 1 0 0 from behind"
+                )
         directions = {f"({x:g}, {y:g}, {z:g})": (x, y, z) for x, y, z in args.push_direction}
     output_dir = Path(args.output)
     controllers = sweep_entries(args.controller)
