@@ -8,7 +8,8 @@ every later request of that session goes to the same worker. So serving uses
 every core, and a slow session delays only the sessions of its own worker.
 The broker polls the client socket and every worker's socket in one
 ``zmq.Poller``, and a request crosses it as it came (its bytes are not
-decoded, only peeked at for ``type`` and ``seq``).
+decoded, only peeked at for ``type`` and ``seq`` by :func:`protocol.codec.peek`,
+whose cost is bounded whatever the message's shape).
 
 The broker never computes a tick. It enforces what a server in front of a
 robot needs:
@@ -49,9 +50,10 @@ import zmq
 
 from controller_server.asset_cache import AssetCache
 from controller_server.config import SINGLE_THREADED_BLAS, ServeConfig
+from controller_server.memory import return_large_buffers_to_the_system
 from controller_server.session_table import SessionTable
 from controller_server.worker import REPLY_HEADER, REQUEST_HEADER, Channel
-from protocol.codec import decode, encode
+from protocol.codec import decode, encode, peek
 from protocol.errors import AssetsMissing, ErrorCode, ProtocolError
 from protocol.messages import Asset, Error, Hello, Message, SessionStats, Stats
 
@@ -161,22 +163,6 @@ def _error_of(exc: ProtocolError, max_message_bytes: int) -> Error:
     )
 
 
-def _peek(payload: bytes) -> tuple[str | None, int, bool]:
-    """``type``, ``seq`` and whether it names files by hash, without validating (msgpack only)."""
-    try:
-        head = msgpack.unpackb(payload, raw=False, strict_map_key=True)
-    except Exception:  # garbage: the full decode says what is wrong
-        return None, -1, False
-    if not isinstance(head, dict):
-        return None, -1, False
-    kind, seq = head.get("type"), head.get("seq")
-    return (
-        kind if isinstance(kind, str) else None,
-        seq if type(seq) is int and 0 <= seq < 2**63 else -1,
-        bool(head.get("model_asset_hashes")),
-    )
-
-
 class ControllerServer:
     """Serve controllers to many clients over ZeroMQ, sessions in worker processes.
 
@@ -188,6 +174,7 @@ class ControllerServer:
     """
 
     def __init__(self, config: ServeConfig):
+        return_large_buffers_to_the_system()  # a long message's buffers leave with it
         self.config = config
         self.stop_event = threading.Event()
         self.routes: dict[bytes, _Route] = {}
@@ -410,7 +397,10 @@ class ControllerServer:
         self._route(identity, client, payload)
 
     def _route(self, identity: bytes, client: str, payload: bytes) -> None:
-        kind, seq, by_hash = _peek(payload)
+        kind, seq, by_hash, refusal = peek(payload)
+        if refusal is not None:  # over a cap: answered here, never decoded anywhere
+            self._reply(identity, _error_of(refusal, self.config.max_message_bytes))
+            return
         route = self.routes.get(identity)
         if route is not None and route.client != client:
             route = None  # another peer reusing this routing id: not its session

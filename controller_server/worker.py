@@ -205,8 +205,10 @@ def run_worker(
         asset_dir: Directory of the broker's asset cache (``None``: none).
     """
     from controller_server.files import set_model_directories
+    from controller_server.memory import return_large_buffers_to_the_system
     from controller_server.models.robot_model import set_model_cache_size
 
+    return_large_buffers_to_the_system()  # a long request's buffers leave with it
     set_model_directories(config.model_dirs, max_file_bytes=config.max_model_bytes)
     set_model_cache_size(config.model_cache_entries)
     _warm_up(config.max_model_bytes)  # its drop returns the warm-up session's memory

@@ -15,6 +15,7 @@ from clients.sim.scenario import Scenario, scenario_warnings
 
 __all__ = [
     "JOINT_GROUPS",
+    "START_OFFSET_NOTE_M",
     "asks_behavior",
     "base_estimate_error_series",
     "base_estimate_errors",
@@ -22,6 +23,7 @@ __all__ = [
     "jump_metrics",
     "scenario_kind",
     "sole_and_com_series",
+    "start_pose_note",
     "strictly_inside",
     "touchdowns",
     "walking_metrics",

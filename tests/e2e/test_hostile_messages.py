@@ -1,0 +1,85 @@
+"""Messages built to cost the broker: refused at a bounded cost while another client ticks.
+
+Issue 32, finding 1: the broker decoded every request in full first. A 14 MB
+message of 15 M empty arrays cost it 10.8 s and 1 GB (five froze the server for
+69 s); a 13 MB hello of many small contacts about 1 s. The broker now peeks at
+a bounded cost (``protocol.codec.peek``) and answers such a message itself.
+Costs are the broker's CPU time and resident memory, read from ``/proc``:
+neither depends on how busy the machine is.
+"""
+
+from __future__ import annotations
+
+import os
+
+import msgpack
+import numpy as np
+import pytest
+
+from clients.server_process import ServerProcess
+from protocol import PROTOCOL_VERSION, ErrorCode, decode
+from protocol.messages import Command, Hello
+from tests.e2e.test_server_safety import Peer, standing
+from tests.protocol.test_peek import many_empty_arrays
+
+pytestmark = pytest.mark.e2e
+
+HOSTILE_COUNT = 5
+
+
+def broker_cpu_s(server: ServerProcess) -> float:
+    """User plus system CPU time of the broker process so far (s)."""
+    with open(f"/proc/{server.process.pid}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def broker_mb(server: ServerProcess) -> float:
+    """Resident memory of the broker process (MB)."""
+    with open(f"/proc/{server.process.pid}/status") as status:
+        line = next(line for line in status if line.startswith("VmRSS:"))
+    return int(line.split()[1]) / 1024
+
+
+def many_contacts_hello(count: int) -> bytes:
+    """A hello of ``count`` one-point contacts (about 75 bytes each)."""
+    contacts = [
+        {"name": f"c{i}", "frame": "left_foot", "points_in_frame": [[0.0, 0.0, 0.0]]}
+        for i in range(count)
+    ]
+    hello = {"type": "hello", "version": PROTOCOL_VERSION, "seq": 9, "model": "thesis_humanoid"}
+    return msgpack.packb({**hello, "contacts": contacts})
+
+
+@pytest.mark.slow
+def test_costly_messages_are_refused_cheaply_while_another_client_ticks():
+    attacks = [many_empty_arrays(14_000_000)] * HOSTILE_COUNT
+    attacks += [many_contacts_hello(175_000)] * HOSTILE_COUNT  # 13 MB
+    with (
+        ServerProcess(extra_args=["--workers", "2", "--deadline", "10"]) as server,
+        Peer(server.endpoint) as ticker,
+        Peer(server.endpoint) as attacker,
+    ):
+        welcome = ticker.ask(Hello(model="thesis_humanoid", controller="tracking"))
+        for seq in range(1, 4):
+            assert isinstance(ticker.ask(standing(welcome, seq=seq)), Command)
+        cpu_before, memory_before = broker_cpu_s(server), broker_mb(server)
+        seq = 10
+        replies = []
+        for attack in attacks:
+            assert len(attack) > 12_000_000
+            attacker.socket.send(attack)
+            for _ in range(5):  # the robot's ticks go on meanwhile, each answered
+                seq += 1
+                assert isinstance(ticker.ask(standing(welcome, seq=seq)), Command)
+            assert attacker.socket.poll(10_000), "no reply to a hostile message"
+            replies.append(decode(attacker.socket.recv()))
+        cpu_spent_s = broker_cpu_s(server) - cpu_before
+        memory_grown_mb = broker_mb(server) - memory_before
+    assert [r.code for r in replies] == [ErrorCode.LIMIT_EXCEEDED] * len(attacks)
+    assert all("msgpack values" in r.detail for r in replies)
+    # Before: 10.8 s and +1 GB for one array message; now ten messages, all of it.
+    print(f"broker: {cpu_spent_s:.2f} s CPU, {memory_grown_mb:+.0f} MB for {len(attacks)}")
+    assert cpu_spent_s < 0.1 * 10.8 * HOSTILE_COUNT
+    assert memory_grown_mb < 40  # the message in hand (14 MB) and its copy, at most
+    assert np.isfinite(cpu_spent_s)
