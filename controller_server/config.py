@@ -47,6 +47,10 @@ class ServeConfig:
         max_message_bytes: Largest request answered; larger ones get
             ``LIMIT_EXCEEDED`` up to twice this size, beyond which ZeroMQ drops
             the connection. At least :data:`MIN_MESSAGE_BYTES`.
+        stalled_message_timeout_s: A connection that completes no message (nor
+            heartbeat) within this long of a heartbeat is dropped, and the part
+            of a message it sent freed: ZeroMQ heartbeats, a ping every
+            :func:`heartbeat_interval_s`.
         max_model_bytes: Largest ``hello.model_text``, file sent with it (inline or
             uploaded), and model or clip file.
         asset_cache_bytes: Bytes of uploaded model files the server keeps (least recently
@@ -74,6 +78,7 @@ class ServeConfig:
     max_sessions_per_client: int = 32
     max_in_flight: int = 2
     max_message_bytes: int = MAX_MESSAGE_BYTES
+    stalled_message_timeout_s: float = 30.0
     max_model_bytes: int = 4 * 1024 * 1024
     asset_cache_bytes: int = 256 * 1024 * 1024
     max_upload_bytes_per_client: int = 64 * 1024 * 1024
@@ -96,6 +101,7 @@ class ServeConfig:
             "max_sessions_per_client": self.max_sessions_per_client,
             "max_in_flight": self.max_in_flight,
             "max_message_bytes": self.max_message_bytes,
+            "stalled_message_timeout_s": self.stalled_message_timeout_s,
             "max_model_bytes": self.max_model_bytes,
             "asset_cache_bytes": self.asset_cache_bytes,
             "max_upload_bytes_per_client": self.max_upload_bytes_per_client,
@@ -111,6 +117,11 @@ class ServeConfig:
             )
         if not self.endpoints:
             raise ValueError("give at least one endpoint to bind")
+
+    @property
+    def heartbeat_interval_s(self) -> float:
+        """How often the server pings each connection: a fifth of the stall timeout, ≤ 5 s."""
+        return min(5.0, self.stalled_message_timeout_s / 5)
 
     def to_json(self) -> str:
         """The record as JSON (for a worker's command line)."""

@@ -193,6 +193,11 @@ class ControllerServer:
         self._frontend = self._context.socket(zmq.ROUTER)
         self._frontend.setsockopt(zmq.LINGER, 0)
         self._frontend.setsockopt(zmq.MAXMSGSIZE, 2 * config.max_message_bytes)
+        # A peer that stalls mid-message holds that message's memory; heartbeats drop it.
+        self._frontend.setsockopt(zmq.HEARTBEAT_IVL, int(config.heartbeat_interval_s * 1000))
+        self._frontend.setsockopt(
+            zmq.HEARTBEAT_TIMEOUT, int(config.stalled_message_timeout_s * 1000)
+        )
         self._curve = config.curve_secret_key is not None
         if self._curve:
             self._enable_curve()

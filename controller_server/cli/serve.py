@@ -33,6 +33,7 @@ def serve_config(args: argparse.Namespace) -> ServeConfig:
         max_sessions_per_client=args.max_sessions_per_client,
         max_in_flight=args.max_in_flight,
         max_message_bytes=args.max_message_bytes,
+        stalled_message_timeout_s=args.stalled_message_timeout,
         max_model_bytes=args.max_model_bytes,
         asset_cache_bytes=args.asset_cache_bytes,
         max_upload_bytes_per_client=args.max_upload_bytes_per_client,
@@ -202,6 +203,15 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         metavar="BYTES",
         help="largest request answered, at least 65536 (default: 16 MiB); a model's files "
         "of any size still arrive, uploaded in chunks of this size",
+    )
+    serve.add_argument(
+        "--stalled-message-timeout",
+        type=float,
+        default=30.0,
+        metavar="SECONDS",
+        help="drop a connection that completes no message (nor heartbeat) this long after "
+        "a heartbeat, freeing the part of a message it sent (default: 30; a client "
+        "uploading one message more slowly than max-message-bytes per this long is dropped)",
     )
     serve.add_argument(
         "--max-model-bytes",

@@ -11,6 +11,7 @@ neither depends on how busy the machine is.
 from __future__ import annotations
 
 import os
+import socket
 
 import msgpack
 import numpy as np
@@ -83,3 +84,41 @@ def test_costly_messages_are_refused_cheaply_while_another_client_ticks():
     assert cpu_spent_s < 0.1 * 10.8 * HOSTILE_COUNT
     assert memory_grown_mb < 40  # the message in hand (14 MB) and its copy, at most
     assert np.isfinite(cpu_spent_s)
+
+
+def zmtp_dealer(endpoint: str) -> socket.socket:
+    """A raw TCP connection that speaks ZMTP 3.1 (NULL mechanism) as a DEALER."""
+    host, port = endpoint.removeprefix("tcp://").rsplit(":", 1)
+    connection = socket.create_connection((host, int(port)), timeout=10)
+    greeting = b"\xff" + b"\x00" * 8 + b"\x7f" + b"\x03\x01" + b"NULL".ljust(20, b"\x00")
+    connection.sendall(greeting + b"\x00" + b"\x00" * 31)
+    name, value = b"Socket-Type", b"DEALER"
+    ready = b"\x05READY" + bytes([len(name)]) + name + len(value).to_bytes(4, "big") + value
+    connection.sendall(b"\x04" + bytes([len(ready)]) + ready)
+    return connection
+
+
+@pytest.mark.slow
+def test_half_sent_messages_are_dropped_and_their_memory_freed():
+    """Issue 32, finding 4: 20 connections each sending half of a 30 MiB message held
+    the broker at 47 → 652 MB for as long as they liked. Heartbeats now drop a
+    connection that completes nothing within the stall timeout."""
+    size, connections = 12 * 1024 * 1024, 8
+    args = ["--workers", "1", "--stalled-message-timeout", "2"]
+    with ServerProcess(extra_args=args) as server:
+        before_mb = broker_mb(server)
+        stalled = [zmtp_dealer(server.endpoint) for _ in range(connections)]
+        for connection in stalled:  # a long frame's header, then half its bytes
+            connection.sendall(b"\x02" + size.to_bytes(8, "big") + b"\x01" * (size // 2))
+        held_mb = broker_mb(server) - before_mb
+        for connection in stalled:  # the server closes each: EOF after its greeting
+            connection.settimeout(60)
+            while connection.recv(65536):
+                pass
+            connection.close()
+        freed_mb = broker_mb(server) - before_mb
+        with Peer(server.endpoint) as peer:  # and it serves as before
+            assert peer.ask(Hello(model="dino_biped")).type == "welcome"
+    print(f"broker: +{held_mb:.0f} MB held by {connections} half messages, +{freed_mb:.0f} after")
+    assert held_mb > 0.5 * connections * size / 2 / 2**20  # the halves did arrive
+    assert freed_mb < 0.2 * held_mb
