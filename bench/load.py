@@ -8,7 +8,10 @@ One run prints:
    ceiling);
 2. 8 clients paced at 1 kHz each for 10 s: ticks answered, p50/p99 round trip;
 3. a `tracking` client at 200 Hz beside a `prioritized` client at full rate
-   (goal: the tracking client gets ≥ 95 % of its ticks within 5 ms).
+   (goal: the tracking client gets ≥ 95 % of its ticks within 5 ms);
+4. the same beside one client's four `prioritized` sessions at full rate (the
+   tracking client from another address, 127.0.0.2: the server shares its
+   workers between clients, not sessions; same goal).
 
 Usage: python bench/load.py [--seconds 10]
 """
@@ -137,17 +140,41 @@ def main() -> None:
             seconds,
             progress=log,
         )
+    print_fairness(tracking, [prioritized], seconds)
+
+    print(
+        f"\n4. `tracking` at 200 Hz (from 127.0.0.2) beside one client's four `prioritized` "
+        f"sessions at full rate, {seconds:g} s, 2 workers"
+    )
+    with ServerProcess(extra_args=["--workers", "2"]) as server:
+        prioritized_hello = Hello(model="thesis_humanoid", controller="prioritized")
+        tracking, *flood = run_clients(
+            server.endpoint,
+            [
+                ("tracking", Hello(model="thesis_humanoid", controller="tracking"), 200.0),
+                *((f"flood {i}", prioritized_hello, None) for i in range(4)),
+            ],
+            seconds,
+            progress=log,
+            sources={"tracking": "127.0.0.2"},
+        )
+    print_fairness(tracking, flood, seconds)
+
+
+def print_fairness(tracking: ClientLoad, others: list[ClientLoad], seconds: float) -> None:
+    """The tracking client's share of ticks within 5 ms, and what the others got."""
     within = tracking.within(0.005)
     print(
         f"tracking: {tracking.ticks} ticks, {tracking.commands} answered, {within} within 5 ms "
         f"({within / max(1, tracking.ticks):.1%}; goal ≥ 95 %), "
         f"p50 {tracking.percentile_ms(50):.2f} ms, p99 {tracking.percentile_ms(99):.2f} ms"
     )
-    print(
-        f"prioritized: {prioritized.commands} answered ({prioritized.commands / seconds:.0f}/s), "
-        f"p50 {prioritized.percentile_ms(50):.2f} ms, p99 {prioritized.percentile_ms(99):.2f} ms"
-        f"  {prioritized.errors or ''}"
-    )
+    for other in others:
+        print(
+            f"{other.label}: {other.commands} answered ({other.commands / seconds:.0f}/s), "
+            f"p50 {other.percentile_ms(50):.2f} ms, p99 {other.percentile_ms(99):.2f} ms"
+            f"  {other.errors or ''}"
+        )
 
 
 def run_welcome(endpoint: str, hello: Hello):

@@ -66,10 +66,13 @@ def _client(
     start: threading.Barrier,
     load: ClientLoad,
     request: bytes | None,
+    source: str | None = None,
 ) -> None:
     context = zmq.Context()
     socket = context.socket(zmq.DEALER)
     socket.setsockopt(zmq.LINGER, 0)
+    if source is not None:  # libzmq's "tcp://SOURCE:0;HOST:PORT": another client address
+        endpoint = endpoint.replace("tcp://", f"tcp://{source}:0;", 1)
     socket.connect(endpoint)
     try:
         if hello is not None:
@@ -131,6 +134,7 @@ def run_clients(
     duration_s: float,
     request: bytes | None = None,
     progress: Callable[[str], None] | None = None,
+    sources: dict[str, str] | None = None,
 ) -> list[ClientLoad]:
     """Run clients at once for ``duration_s`` and return what each got.
 
@@ -142,6 +146,8 @@ def run_clients(
         duration_s: How long every client sends, from a common start.
         request: The bytes to send when a client has no ``hello``.
         progress: Optional callable told what runs.
+        sources: Source IP address by label (a loopback one, ``127.0.0.2``): the
+            server tells clients apart by address (without CURVE).
     """
     loads = [ClientLoad(label) for label, _, _ in clients]
     start = threading.Barrier(len(clients))
@@ -149,6 +155,7 @@ def run_clients(
         threading.Thread(
             target=_client,
             args=(endpoint, hello, rate, duration_s, start, load, request),
+            kwargs={"source": (sources or {}).get(load.label)},
             daemon=True,
         )
         for (_, hello, rate), load in zip(clients, loads, strict=True)

@@ -52,7 +52,7 @@ from controller_server.asset_cache import AssetCache
 from controller_server.config import SINGLE_THREADED_BLAS, ServeConfig
 from controller_server.memory import return_large_buffers_to_the_system
 from controller_server.session_table import SessionTable
-from controller_server.worker import REPLY_HEADER, REQUEST_HEADER, Channel
+from controller_server.worker import REPLY_HEADER, REQUEST_HEADER, Channel, client_tag
 from protocol.codec import decode, encode, peek
 from protocol.errors import AssetsMissing, ErrorCode, ProtocolError
 from protocol.messages import Asset, Error, Hello, Message, SessionStats, Stats
@@ -93,6 +93,11 @@ class _Route:
     """CURVE key (z85) of the client, or its peer address without CURVE."""
     last_seen_s: float
     in_flight: int = 0
+    client_tag: bytes = b""
+    """The client's tag in request headers: its requests share one turn at the worker."""
+
+    def __post_init__(self) -> None:
+        self.client_tag = client_tag(self.client)
 
 
 @dataclasses.dataclass(slots=True)
@@ -515,7 +520,7 @@ class ControllerServer:
         worker.pending[request_id] = _Pending(
             identity, seq, route, now + deadline_s, now + deadline_s + self.config.recycle_after_s
         )
-        header = REQUEST_HEADER.pack(request_id, route.key, now + deadline_s)
+        header = REQUEST_HEADER.pack(request_id, route.key, now + deadline_s, route.client_tag)
         if not self._to_worker(worker.identity, [b"req", header, payload]):
             self._answer_late(worker.pending.pop(request_id), "its worker cannot take it now")
 

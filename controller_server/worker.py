@@ -13,7 +13,7 @@ broker → worker                                           worker → broker
 ========================================================  ================================
                                                           ``ready``
 ``req``, :data:`REQUEST_HEADER` (id, session key,         ``rep``, :data:`REPLY_HEADER` (id,
-deadline), request                                        session open after it), reply
+deadline, client), request                                session open after it), reply
                                                           — or ``late``, id (past deadline)
 ``drop``, session key, …                                  —
 ``stats``, id, session key, …                             ``stats``, id, msgpack list
@@ -25,8 +25,14 @@ each side, four thread switches per round trip that a busy machine pays
 with tens of µs each. The worker exits when the broker's end closes (the
 broker stopped or died).
 
-The worker checks the deadline before it starts a request, so a queue behind
-a slow tick is skipped rather than computed for states nobody waits for.
+Requests wait in one queue per client and are served one client at a time
+in turn (round robin), reading what has arrived between any two: a client's
+request waits behind at most one request of each other client with work
+here, however many sessions and requests in flight a flooding client has
+(issue 32: one client's four ``prioritized`` sessions starved a ``tracking``
+client, served in arrival order). The worker checks the deadline before it
+starts a request, so a queue behind a slow tick is skipped rather than
+computed for states nobody waits for.
 Once warm, and after each new session, it moves every object it holds to
 the garbage collector's permanent generation (:func:`gc.freeze`), so the
 collections a tick's garbage triggers never walk the robot models and
@@ -35,7 +41,9 @@ imports (a full collection took 15 ms).
 
 from __future__ import annotations
 
+import collections
 import gc
+import hashlib
 import logging
 import signal
 import socket
@@ -52,12 +60,21 @@ from protocol.codec import encode
 from protocol.errors import ErrorCode
 from protocol.messages import Error, Hello
 
-__all__ = ["REPLY_HEADER", "REQUEST_HEADER", "WARM_UP_HELLO", "Channel", "run_worker"]
+__all__ = [
+    "REPLY_HEADER",
+    "REQUEST_HEADER",
+    "WARM_UP_HELLO",
+    "Channel",
+    "FairQueue",
+    "client_tag",
+    "run_worker",
+]
 
 log = logging.getLogger("poise.worker")
 
-REQUEST_HEADER = struct.Struct("<8s8sd")
-"""Request id, session key, deadline on ``time.monotonic()`` (system-wide on Linux)."""
+REQUEST_HEADER = struct.Struct("<8s8sd8s")
+"""Request id, session key, deadline on ``time.monotonic()`` (system-wide on Linux), and
+the client's tag (:func:`client_tag`), whose requests share one turn of the round robin."""
 REPLY_HEADER = struct.Struct("<8s?")
 """Request id, whether the session is open after the request."""
 WARM_UP_HELLO = Hello(model="thesis_humanoid", controller="momentum")
@@ -128,12 +145,16 @@ class Channel:
             del self.outgoing[:sent]
         return True
 
-    def receive(self) -> list[list[bytes]] | None:
-        """The messages that have arrived (the blocking end waits for one); ``None`` at EOF."""
+    def receive(self, wait: bool = True) -> list[list[bytes]] | None:
+        """The messages that have arrived; ``None`` at EOF.
+
+        The blocking end waits for one unless ``wait`` is false.
+        """
         messages = self._complete()
+        flags = 0 if self.blocking and wait else socket.MSG_DONTWAIT
         while not messages:
             try:
-                size = self.socket.recv_into(self._chunk)
+                size = self.socket.recv_into(self._chunk, 0, flags)
             except BlockingIOError:
                 return messages
             except ConnectionError:
@@ -142,7 +163,7 @@ class Channel:
                 return None
             self._incoming += self._chunk[:size]
             messages = self._complete()
-            if not self.blocking:
+            if flags:
                 break
         return messages
 
@@ -172,6 +193,42 @@ class Channel:
         self.socket.close()
 
 
+def client_tag(client: str) -> bytes:
+    """The 8 bytes that stand for a client (CURVE key or peer address) in a request header."""
+    return hashlib.blake2b(client.encode(), digest_size=8).digest()
+
+
+class FairQueue:
+    """Requests by client, taken one client at a time in turn (round robin)."""
+
+    def __init__(self) -> None:
+        self._by_client: dict[bytes, collections.deque[list[bytes]]] = {}
+        self._turns: collections.deque[bytes] = collections.deque()
+
+    def __bool__(self) -> bool:
+        return bool(self._turns)
+
+    def put(self, frames: list[bytes]) -> None:
+        """Queue a ``req`` message behind its client's earlier ones."""
+        tag = REQUEST_HEADER.unpack(frames[1])[3]
+        queue = self._by_client.get(tag)
+        if queue is None:
+            queue = self._by_client[tag] = collections.deque()
+            self._turns.append(tag)
+        queue.append(frames)
+
+    def take(self) -> list[bytes]:
+        """The next client's oldest request; that client goes to the back of the turns."""
+        tag = self._turns.popleft()
+        queue = self._by_client[tag]
+        frames = queue.popleft()
+        if queue:
+            self._turns.append(tag)
+        else:
+            del self._by_client[tag]
+        return frames
+
+
 def _warm_up(max_model_bytes: int) -> None:
     """Open and close one session in a table of its own (imports and model cache are global)."""
     table = SessionTable(max_model_bytes=max_model_bytes)
@@ -182,7 +239,7 @@ def _warm_up(max_model_bytes: int) -> None:
 
 
 def _serve_request(table: SessionTable, header: bytes, payload: bytes) -> list[bytes]:
-    request_id, key, deadline_s = REQUEST_HEADER.unpack(header)
+    request_id, key, deadline_s, _ = REQUEST_HEADER.unpack(header)
     if time.monotonic() > deadline_s:
         return [b"late", request_id]
     try:
@@ -219,20 +276,18 @@ def run_worker(
         asset_dir=asset_dir,
     )
     gc.freeze()
+    requests = FairQueue()
     try:
         channel.send([b"ready"])
         while True:
-            messages = channel.receive()
+            messages = channel.receive(wait=not requests)  # between requests: what is there
             if messages is None:
                 log.warning("broker gone: worker %s exits", identity.decode())
                 return
             for frames in messages:
                 kind = frames[0]
                 if kind == b"req" and len(frames) == 3:
-                    opened = table.sessions_opened
-                    channel.send(_serve_request(table, frames[1], frames[2]))
-                    if table.sessions_opened != opened:  # a new session's model and controller
-                        gc.freeze()
+                    requests.put(frames)
                 elif kind == b"drop":
                     table.drop(frames[1:])
                 elif kind == b"stats" and len(frames) >= 2:
@@ -240,6 +295,12 @@ def run_worker(
                     channel.send([b"stats", frames[1], msgpack.packb(stats)])
                 elif kind == b"stop":
                     return
+            if requests:
+                _, header, payload = requests.take()
+                opened = table.sessions_opened
+                channel.send(_serve_request(table, header, payload))
+                if table.sessions_opened != opened:  # a new session's model and controller
+                    gc.freeze()
     except (BrokenPipeError, ConnectionError):
         log.warning("broker gone: worker %s exits", identity.decode())
     finally:

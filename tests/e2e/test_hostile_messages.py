@@ -10,17 +10,21 @@ neither depends on how busy the machine is.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import socket
+import time
 
 import msgpack
 import numpy as np
 import pytest
+import zmq
 
 from clients.server_process import ServerProcess
-from protocol import PROTOCOL_VERSION, ErrorCode, decode
+from protocol import PROTOCOL_VERSION, ErrorCode, decode, encode
 from protocol.messages import Command, Hello
-from tests.e2e.test_server_safety import Peer, standing
+from tests.e2e.test_server_safety import Peer, resume, standing, worker_pids
 from tests.protocol.test_peek import many_empty_arrays
 
 pytestmark = pytest.mark.e2e
@@ -122,3 +126,48 @@ def test_half_sent_messages_are_dropped_and_their_memory_freed():
     print(f"broker: +{held_mb:.0f} MB held by {connections} half messages, +{freed_mb:.0f} after")
     assert held_mb > 0.5 * connections * size / 2 / 2**20  # the halves did arrive
     assert freed_mb < 0.2 * held_mb
+
+
+def test_a_flooding_client_delays_another_by_one_request_not_by_its_queue():
+    """Issue 32, finding 3: one client's sessions on every worker starved the others.
+
+    A worker serves its requests one client at a time in turn. The worker is
+    stopped while a client with two sessions queues four requests and another
+    client one; resumed, it serves the second client's request second, not
+    fifth (in arrival order, as before, it was last).
+    """
+    with (
+        ServerProcess(extra_args=["--workers", "1", "--deadline", "10"]) as server,
+        contextlib.ExitStack() as stack,
+    ):
+        flood = [stack.enter_context(Peer(server.endpoint)) for _ in range(2)]
+        other = stack.enter_context(Peer(server.endpoint, source="127.0.0.2"))
+        hello = Hello(model="thesis_humanoid", controller="prioritized")
+        welcomes = [peer.ask(hello) for peer in flood]
+        welcome = other.ask(Hello(model="thesis_humanoid", controller="tracking"))
+        (worker,) = worker_pids(server)
+        os.kill(worker, signal.SIGSTOP)
+        stack.callback(resume, [worker])
+        for peer, flood_welcome in zip(flood, welcomes, strict=True):
+            for seq in (2, 3):  # the in-flight cap of each session
+                peer.socket.send(encode(standing(flood_welcome, seq=seq)))
+        time.sleep(0.2)  # the flood is ahead of it at the broker
+        other.socket.send(encode(standing(welcome, seq=2)))
+        time.sleep(0.5)  # all five forwarded to the stopped worker
+        resume([worker])
+        poller = zmq.Poller()
+        for peer in [*flood, other]:
+            poller.register(peer.socket, zmq.POLLIN)
+        flood_replies_before = None
+        flood_replies = 0
+        while flood_replies < 4 or flood_replies_before is None:
+            ready = dict(poller.poll(10_000))
+            assert ready, "no reply"
+            if other.socket in ready:
+                assert isinstance(decode(other.socket.recv()), Command)
+                flood_replies_before = flood_replies
+            for peer in flood:
+                if peer.socket in ready:
+                    assert isinstance(decode(peer.socket.recv()), Command)
+                    flood_replies += 1
+    assert flood_replies_before <= 1, f"served after {flood_replies_before} flood requests"
