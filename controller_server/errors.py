@@ -20,7 +20,9 @@ __all__ = [
     "ModelError",
     "ModelMismatch",
     "ModelNotFound",
+    "ModelTooLarge",
     "ServerFault",
+    "TickTooCostly",
     "UnknownController",
     "wire_code",
 ]
@@ -53,6 +55,18 @@ class ModelNotFound(ModelError):
 
 class ModelMismatch(ModelError):
     """The client expects another model (its ``expected_model_hash`` differs)."""
+
+
+class ModelTooLarge(ModelError):
+    """A model over a cap on what one session may cost the server.
+
+    The caps bound XML nesting and elements, bodies, DoF, contacts and their
+    points, and file bytes (docs/serving.md); the detail names the one hit.
+    """
+
+
+class TickTooCostly(ModelTooLarge):
+    """A session whose tick, timed at ``hello``, would not fit the server's tick budget."""
 
 
 class FrameNotFound(ModelError):
@@ -100,6 +114,7 @@ class ImuFrameError(ServerFault):
 _WIRE_CODES: dict[type[ServerFault], ErrorCode] = {
     ModelNotFound: ErrorCode.MODEL_NOT_FOUND,
     ModelMismatch: ErrorCode.MODEL_MISMATCH,
+    ModelTooLarge: ErrorCode.LIMIT_EXCEEDED,
     ModelError: ErrorCode.MODEL_INVALID,
     InvalidParams: ErrorCode.INVALID_PARAMS,
     UnknownController: ErrorCode.UNKNOWN_CONTROLLER,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 import uuid
 from collections import deque
@@ -10,28 +11,50 @@ from collections import deque
 import numpy as np
 
 from controller_server.controllers import create_controller
-from controller_server.errors import ModelMismatch
+from controller_server.errors import ModelMismatch, ServerFault, TickTooCostly
 from controller_server.estimation import ImuBaseEstimator
 from controller_server.models import load_robot_model
 from controller_server.wire import command_from_output, control_input_from_state
+from protocol.errors import ProtocolError
 from protocol.messages import Command, Hello, Params, SessionStats, SetParams, State, Welcome
 
-__all__ = ["Session"]
+__all__ = ["MIN_TICK_BUDGET_S", "PROBE_TICKS", "TICK_COST_MARGIN", "Session"]
+
+log = logging.getLogger("poise.server")
 
 COMPUTE_TIME_WINDOW = 1000
 """Ticks kept for the compute-time percentiles in ``stats``."""
+
+PROBE_TICKS = 3
+"""Ticks a ``hello`` times on the standing state (the fastest counts: others' load only adds)."""
+TICK_COST_MARGIN = 10.0
+"""How much longer than the standing tick other states' ticks may take.
+
+Measured on the built-in robots with 2 × 4 to 2 × 64 points per foot: random states
+near standing (joint spread 0.3 rad, random supports) took up to 3× the standing tick
+at 2 × 4 points, 7× at 2 × 32 and 35× at 2 × 64 (the caps on points keep the ratio
+near the first); every QP is capped in iterations besides."""
+MIN_TICK_BUDGET_S = 0.5
+"""Tick budget of a server whose deadline is shorter (a deadline below any tick is how a
+test gets ``DEADLINE_EXCEEDED``): its late ticks are answered so, without a refusal."""
 
 
 class Session:
     """State the server keeps for one client identity between requests."""
 
-    def __init__(self, hello: Hello):
+    def __init__(self, hello: Hello, tick_budget_s: float | None = None):
         """Load the model and create the controller named in ``hello``.
 
+        Args:
+            hello: The request.
+            tick_budget_s: Longest a tick may take (the server's deadline): a session
+                whose standing tick × :data:`TICK_COST_MARGIN` exceeds
+                ``max(tick_budget_s, MIN_TICK_BUDGET_S)`` is refused. ``None``: not timed.
+
         Raises:
-            ServerFault: Model not found, invalid or mismatched
-                (:mod:`controller_server.errors`), unknown controller, or invalid
-                initial parameters.
+            ServerFault: Model not found, invalid, mismatched or over a cap
+                (:mod:`controller_server.errors`), unknown controller, invalid
+                initial parameters, or a tick over the budget (``TickTooCostly``).
         """
         self.robot = load_robot_model(
             hello.model,
@@ -51,6 +74,8 @@ class Session:
                 field="expected_model_hash",
             )
         self.controller = create_controller(hello.controller, self.robot, hello.params)
+        if tick_budget_s is not None:
+            self._check_tick_cost(hello, max(tick_budget_s, MIN_TICK_BUDGET_S))
         self.base_estimator = ImuBaseEstimator(self.robot, hello)
         self.diagnostics_period_ticks = hello.diagnostics_period_ticks
         self.session_id = uuid.uuid4().hex
@@ -58,6 +83,56 @@ class Session:
         self.errors = 0
         self.last_seen_s = time.monotonic()
         self._compute_times_s: deque[float] = deque(maxlen=COMPUTE_TIME_WINDOW)
+
+    def _check_tick_cost(self, hello: Hello, budget_s: float) -> None:
+        """Time :data:`PROBE_TICKS` ticks of a copy of the controller on the standing state.
+
+        The copy runs its optimizer every tick (``optimizer_period_ticks`` 1, where it has
+        one), diagnostics included, so that this session's controller starts fresh.
+
+        Raises:
+            TickTooCostly: The fastest tick × :data:`TICK_COST_MARGIN` exceeds ``budget_s``.
+        """
+        probe = create_controller(hello.controller, self.robot, hello.params)
+        if "optimizer_period_ticks" in probe.parameters():
+            probe.set_params({"optimizer_period_ticks": 1})
+        robot = self.robot
+        standing = State(
+            seq=0,
+            time_s=0.0,
+            joint_position=np.array(robot.standing_joint_position, float),
+            joint_velocity=np.zeros(robot.nv_joints),
+            position_base_in_world=np.array(robot.standing_position_base_in_world, float),
+            orientation_base_in_world_xyzw=np.array(
+                robot.standing_orientation_base_in_world_xyzw, float
+            ),
+            linear_velocity_base_in_world=np.zeros(3),
+            angular_velocity_base_in_base=np.zeros(3),
+            contact_flags=[True] * len(robot.contacts),
+        )
+        fastest_s = float("inf")
+        for _ in range(PROBE_TICKS):
+            start = time.perf_counter()
+            try:
+                control_input, _ = control_input_from_state(robot, standing, True)
+                probe.compute(control_input)
+            except (ServerFault, ProtocolError) as exc:  # the time spent counts all the same
+                log.info("probe tick of a new session failed: %s", exc)
+            elapsed_s = time.perf_counter() - start
+            fastest_s = min(fastest_s, elapsed_s)
+            if elapsed_s > budget_s:
+                break  # over the whole budget alone: not worth repeating
+        if fastest_s * TICK_COST_MARGIN <= budget_s:
+            return
+        raise TickTooCostly(
+            f"a tick of this model and controller takes {fastest_s * 1e3:.1f} ms on this "
+            f"server standing (nv = {robot.model.nv}, {len(robot.contacts)} contacts, "
+            f"{robot.num_contact_points} points), and other states up to "
+            f"{TICK_COST_MARGIN:g}× that: over the {budget_s * 1e3:g} ms budget (the server's "
+            "`poise serve --deadline`); use fewer contact points or joints, or a server with "
+            "a longer deadline",
+            field="model",
+        )
 
     def welcome(self, seq: int) -> Welcome:
         """The handshake reply describing this session's robot and controller."""

@@ -51,9 +51,12 @@ if TYPE_CHECKING:
     from controller_server.session import Session
     from protocol.recording import Recorder
 
-__all__ = ["SessionTable", "release_free_memory"]
+__all__ = ["DEFAULT_TICK_BUDGET_S", "SessionTable", "release_free_memory"]
 
 log = logging.getLogger("poise.server")
+
+DEFAULT_TICK_BUDGET_S = 0.5
+"""Tick budget of a table not told the server's deadline (``poise serve --deadline``'s default)."""
 
 
 def _load_libc_trim():  # type: ignore[no-untyped-def]
@@ -97,6 +100,11 @@ class SessionTable:
         max_message_bytes: Largest request decoded (the broker refuses larger ones first).
         asset_dir: The broker's asset cache, where ``hello.model_asset_hashes`` are
             looked up (``None``: every such file is missing).
+        tick_budget_s: Longest a session's tick may take, the server's deadline
+            (``ServeConfig.deadline_s``): a ``hello`` whose tick, timed on the standing
+            state, would not fit is refused ``LIMIT_EXCEEDED``
+            (:meth:`Session.__init__ <controller_server.session.Session>`); ``None``:
+            ticks are not timed at ``hello``.
     """
 
     def __init__(
@@ -106,8 +114,10 @@ class SessionTable:
         *,
         max_message_bytes: int = MAX_MESSAGE_BYTES,
         asset_dir: str | Path | None = None,
+        tick_budget_s: float | None = DEFAULT_TICK_BUDGET_S,
     ):
         self.max_model_bytes = max_model_bytes
+        self.tick_budget_s = tick_budget_s
         self.max_message_bytes = max_message_bytes
         self.asset_dir = asset_dir
         self.record_dir = None if record_dir is None else Path(record_dir)
@@ -248,10 +258,20 @@ class SessionTable:
                 )
         # Imported here: the broker keeps a table without sessions to answer requests
         # that have none, and never loads Pinocchio or a controller.
+        from controller_server.models.description import MAX_ASSET_BYTES
         from controller_server.session import Session
 
+        total = sum(len(data) for data in (request.model_assets or {}).values())
+        if total > MAX_ASSET_BYTES:  # what the model may read of them: refused before parsing
+            raise ProtocolError(
+                ErrorCode.LIMIT_EXCEEDED,
+                "model_assets",
+                f"the files sent with the model hold {total} bytes; a model may read at most "
+                f"{MAX_ASSET_BYTES} bytes of files (docs/serving.md)",
+                request.seq,
+            )
         try:
-            session = Session(request)
+            session = Session(request, self.tick_budget_s)
         except ProtocolError as exc:
             exc.seq = request.seq
             raise

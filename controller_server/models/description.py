@@ -43,8 +43,11 @@ From the model, a :class:`RobotDescription` finds:
 
 from __future__ import annotations
 
+import math
 import os
 import posixpath
+import re
+import struct
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -55,14 +58,26 @@ import numpy as np
 import pinocchio as pin
 
 from protocol.errors import did_you_mean
-from protocol.messages import ContactSpec
+from protocol.messages import (
+    MAX_CONTACT_POINTS,
+    MAX_CONTACTS,
+    MAX_POINTS_PER_CONTACT,
+    ContactSpec,
+)
 
 __all__ = [
     "FOOT_CANDIDATE_HEIGHT_FRACTION",
     "FOOT_HEIGHT_TOLERANCE_M",
+    "MAX_ASSET_BYTES",
+    "MAX_BODIES",
+    "MAX_DOF",
+    "MAX_IMAGE_PIXELS",
     "MAX_PACKAGE_SEARCH_DEPTH",
+    "MAX_XML_DEPTH",
+    "MAX_XML_ELEMENTS",
     "SOLE_HEIGHT_TOLERANCE_M",
     "DescriptionError",
+    "DescriptionLimitError",
     "FileReader",
     "FoundContact",
     "FrameNotFoundError",
@@ -94,6 +109,28 @@ MAX_INCLUDE_DEPTH = 16
 """Deepest chain of includes followed."""
 MAX_PACKAGE_SEARCH_DEPTH = 8
 """Deepest directory below a ``ROS_PACKAGE_PATH`` entry searched for a package."""
+
+# Caps on what reading a model may cost, so that a file sent by a client cannot
+# hold a server worker for long (issue 32). Each is several times what real
+# robots need; the numbers measured are in docs/serving.md.
+MAX_XML_DEPTH = 128
+"""Deepest nesting of elements in a model's XML, includes inlined (a humanoid MJCF: ~20)."""
+MAX_XML_ELEMENTS = 20_000
+"""Elements of a model's XML, includes inlined, those inside ``<replicate>``,
+``<composite>`` and ``<flexcomp>`` counted as often as they repeat (a vendor
+humanoid MJCF: a few hundred to 2,000)."""
+MAX_BODIES = 500
+"""Bodies of a compiled MJCF (robot, props and world), links of a URDF."""
+MAX_DOF = 200
+"""Degrees of freedom of a model (``nv``, a free base's 6 included): Talos has 38, a
+humanoid with two dexterous hands about 90. Loading and a tick take about 0.6 s and
+0.05–0.25 s at 200, 13–19 s and 0.4–0.9 s at 400."""
+MAX_ASSET_BYTES = 64 * 1024 * 1024
+"""Bytes of the files a model's meshes, textures, height fields and skins read, a file
+counted each time it is named (MuJoCo compiles each naming): ~3 s of compiling."""
+MAX_IMAGE_PIXELS = 64 * 1024 * 1024
+"""Pixels of a model's textures and height fields together (PNG files' and built-in
+ones): a small PNG file may decode into gigabytes."""
 
 FileReader = Callable[[str], bytes]
 """Reads a file named by a model, by the name the model gives it.
@@ -132,6 +169,10 @@ class DescriptionError(ValueError):
     def __init__(self, message: str, *, field: str = "model"):
         super().__init__(message)
         self.field = field
+
+
+class DescriptionLimitError(DescriptionError):
+    """The model exceeds a cap on what reading or serving it may cost (the ``MAX_*`` constants)."""
 
 
 class FrameNotFoundError(DescriptionError):
@@ -376,9 +417,14 @@ def expand_mjcf(text: bytes | str, read: FileReader | None) -> tuple[str, dict[s
     root = _parse_xml(text, "the model")
     if root.tag != "mujoco":
         raise DescriptionError(f"an MJCF file's root element is <mujoco>, not <{root.tag}>")
-    _inline_includes(root, read, depth=0, chain=())
+    _inline_includes(root, read, depth=0, chain=(), level=1, elements=[_count_elements(root)])
     if root.find(".//plugin") is not None or root.find(".//extension") is not None:
         raise DescriptionError("MuJoCo plugins (<extension>, <plugin>) are not supported")
+    if root.find(".//attach") is not None or root.find("./asset/model") is not None:
+        # MuJoCo would resolve the files an attached model names itself, from disk.
+        raise DescriptionError(
+            "MJCF <attach> and <model> assets are not supported: <include> the file instead"
+        )
     directories = {"meshdir": "", "texturedir": ""}
     strip_paths = False
     for compiler in root.iter("compiler"):
@@ -392,7 +438,9 @@ def expand_mjcf(text: bytes | str, read: FileReader | None) -> tuple[str, dict[s
     _name_unnamed_assets(root)
     assets: dict[str, bytes] = {}
     keys: dict[str, str] = {}
-    for element in root.iter():
+    cost = _Cost()
+    for element, times in _elements_with_repeats(root):
+        cost.count(element, times)
         for attribute, value in list(element.attrib.items()):
             if not attribute.startswith("file"):
                 continue
@@ -400,10 +448,117 @@ def expand_mjcf(text: bytes | str, read: FileReader | None) -> tuple[str, dict[s
             directory = directories.get(_ASSET_DIRECTORY.get(element.tag, ""), "")
             path = posixpath.normpath(posixpath.join(directory, name))
             if path not in keys:
-                keys[path] = f"poise_asset_{len(keys)}{PurePosixPath(path).suffix.lower()}"
+                # A generated name, never the file's: nothing of it reaches MuJoCo's parser,
+                # and every name in the XML is a key of the assets (MuJoCo reads a file
+                # missing from them from its working directory).
+                keys[path] = f"poise_asset_{len(keys)}{_safe_suffix(path)}"
                 assets[keys[path]] = _read(read, path, f"<{element.tag} {attribute}>")
             element.set(attribute, keys[path])
+            cost.add_file(path, assets[keys[path]], times)
     return ET.tostring(root, encoding="unicode"), assets
+
+
+def _safe_suffix(path: str) -> str:
+    """A file's suffix, lowercase, if it is letters and digits (MuJoCo picks a decoder by it)."""
+    suffix = PurePosixPath(path.replace("\\", "/")).suffix.lower()
+    return suffix if re.fullmatch(r"\.[a-z0-9]{1,10}", suffix) else ""
+
+
+def _count_elements(root: ET.Element) -> int:
+    return sum(1 for _ in root.iter())
+
+
+def _xml_depth(root: ET.Element) -> int:
+    """Levels of elements under and including ``root`` (without recursion)."""
+    depth, level = 0, [root]
+    while level:
+        depth += 1
+        level = [child for element in level for child in element]
+    return depth
+
+
+def _repeats(element: ET.Element) -> int:
+    """How many times MuJoCo makes what an element holds (``<replicate count>`` and the like)."""
+    if element.tag not in ("replicate", "composite", "flexcomp"):
+        return 1
+    times = 1
+    for word in element.get("count", "1").split():
+        try:
+            value = float(word)
+        except ValueError:
+            continue  # MuJoCo's to refuse
+        times *= max(1, math.ceil(value)) if math.isfinite(value) else MAX_XML_ELEMENTS + 1
+    return times
+
+
+def _elements_with_repeats(root: ET.Element) -> list[tuple[ET.Element, int]]:
+    """Every element (document order) and how many copies of it MuJoCo will make.
+
+    Raises:
+        DescriptionLimitError: More than :data:`MAX_XML_ELEMENTS` copies in all.
+    """
+    found: list[tuple[ET.Element, int]] = []
+    total = 0
+    stack = [(root, 1)]
+    while stack:
+        element, times = stack.pop()
+        total += times
+        if total > MAX_XML_ELEMENTS:
+            raise DescriptionLimitError(
+                f"the model has more than {MAX_XML_ELEMENTS} XML elements, those inside "
+                "<replicate>, <composite> and <flexcomp> counted as often as they repeat"
+            )
+        found.append((element, times))
+        inner = times * _repeats(element)
+        stack.extend((child, inner) for child in reversed(element))
+    return found
+
+
+class _Cost:
+    """Bytes of files and pixels of images a model makes MuJoCo compile, within the caps."""
+
+    def __init__(self) -> None:
+        self.file_bytes = 0
+        self.pixels = 0
+
+    def count(self, element: ET.Element, times: int) -> None:
+        """Count an element's built-in image (a texture's ``width``, a height field's ``nrow``)."""
+        if element.tag == "texture" and not any(a.startswith("file") for a in element.attrib):
+            faces = 6 if element.get("type") in ("cube", "skybox") else 1
+            pixels = faces * _number(element, "width") * _number(element, "height")
+            self._add_pixels(pixels * times, element.tag)
+        elif element.tag == "hfield" and "file" not in element.attrib:
+            self._add_pixels(_number(element, "nrow") * _number(element, "ncol") * times, "hfield")
+
+    def add_file(self, path: str, data: bytes, times: int) -> None:
+        """Count a file named ``times`` times: its bytes, and its pixels if it is a PNG image."""
+        self.file_bytes += len(data) * times
+        if self.file_bytes > MAX_ASSET_BYTES:
+            raise DescriptionLimitError(
+                f"the model's meshes, textures, height fields and skins read more than "
+                f"{MAX_ASSET_BYTES // (1024 * 1024)} MiB of files, each counted as often as it "
+                f"is named (at {path[:100]!r})"
+            )
+        if data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR" and len(data) >= 24:
+            width, height = struct.unpack(">II", data[16:24])
+            self._add_pixels(width * height * times, f"the image {path[:100]!r}")
+
+    def _add_pixels(self, pixels: int, what: str) -> None:
+        self.pixels += pixels
+        if self.pixels > MAX_IMAGE_PIXELS:
+            raise DescriptionLimitError(
+                f"the model's textures and height fields have more than {MAX_IMAGE_PIXELS} "
+                f"pixels together (at {what})"
+            )
+
+
+def _number(element: ET.Element, attribute: str) -> int:
+    """A whole-number attribute, 0 if missing or not a finite number (MuJoCo's to refuse)."""
+    try:
+        value = float(element.get(attribute, "0"))
+    except ValueError:
+        return 0
+    return max(0, math.ceil(value)) if math.isfinite(value) else MAX_IMAGE_PIXELS + 1
 
 
 def _name_unnamed_assets(root: ET.Element) -> None:
@@ -427,10 +582,22 @@ def _name_unnamed_assets(root: ET.Element) -> None:
 
 
 def _parse_xml(text: bytes | str, what: str) -> ET.Element:
+    """The XML's root element.
+
+    Raises:
+        DescriptionError: Not XML.
+        DescriptionLimitError: Nested deeper than :data:`MAX_XML_DEPTH`, or more than
+            :data:`MAX_XML_ELEMENTS` elements.
+    """
     try:
-        return ET.fromstring(text)
+        root = ET.fromstring(text)
     except ET.ParseError as exc:
         raise DescriptionError(f"{what} is not valid XML: {exc}") from None
+    if _count_elements(root) > MAX_XML_ELEMENTS:
+        raise DescriptionLimitError(f"{what} has more than {MAX_XML_ELEMENTS} XML elements")
+    if _xml_depth(root) > MAX_XML_DEPTH:
+        raise DescriptionLimitError(f"{what} nests XML elements more than {MAX_XML_DEPTH} deep")
+    return root
 
 
 def _read(read: FileReader | None, path: str, what: str) -> bytes:
@@ -473,11 +640,26 @@ def _read_or_say_why(read: FileReader | None, path: str) -> bytes:
 
 
 def _inline_includes(
-    element: ET.Element, read: FileReader | None, depth: int, chain: tuple[str, ...]
+    element: ET.Element,
+    read: FileReader | None,
+    depth: int,
+    chain: tuple[str, ...],
+    level: int,
+    elements: list[int],
 ) -> None:
+    """Replace each ``<include>`` under ``element`` (at nesting ``level``) by the file's children.
+
+    ``elements`` holds the count of elements so far, includes inlined: the same file
+    included many times (and including others) grows the document by each copy.
+
+    Raises:
+        DescriptionError: As :func:`expand_mjcf`.
+        DescriptionLimitError: The inlined document would nest deeper than
+            :data:`MAX_XML_DEPTH` or hold more than :data:`MAX_XML_ELEMENTS` elements.
+    """
     for index, child in enumerate(list(element)):
         if child.tag != "include":
-            _inline_includes(child, read, depth, chain)
+            _inline_includes(child, read, depth, chain, level + 1, elements)
             continue
         path = posixpath.normpath(child.get("file", ""))
         if path in chain or depth >= MAX_INCLUDE_DEPTH:
@@ -485,7 +667,18 @@ def _inline_includes(
         included = _parse_xml(_read(read, path, "<include file>"), f"included file {path!r}")
         if included.tag != "mujoco":
             raise DescriptionError(f"included file {path!r} must have a <mujoco> root element")
-        _inline_includes(included, read, depth + 1, (*chain, path))
+        elements[0] += _count_elements(included)
+        if elements[0] > MAX_XML_ELEMENTS:
+            raise DescriptionLimitError(
+                f"the model has more than {MAX_XML_ELEMENTS} XML elements, its includes inlined"
+            )
+        if level + _xml_depth(included) - 1 > MAX_XML_DEPTH:
+            raise DescriptionLimitError(
+                f"the model nests XML elements more than {MAX_XML_DEPTH} deep, its includes "
+                f"inlined (at {path!r})"
+            )
+        # The included root's children take the <include>'s place, one level below element.
+        _inline_includes(included, read, depth + 1, (*chain, path), level, elements)
         element.remove(child)
         for offset, grandchild in enumerate(list(included)):
             element.insert(index + offset, grandchild)
@@ -687,6 +880,7 @@ def describe(
         found, source = _find_feet(model, data, draft.bodies), "collision geometry"
     if not found:
         raise DescriptionError("no contacts: name the feet (`contacts`)", field="contacts")
+    _check_contacts(found, source)
     draft.warnings += [
         f"contact {c.name!r} touches at {len(c.points_in_frame)} point(s) in the standing pose, "
         "too few to balance on alone: give its points, or a keyframe with the foot flat"
@@ -716,6 +910,35 @@ def describe(
         warnings=tuple(draft.warnings),
         disabled_collision_pairs=draft.disabled_collision_pairs,
     )
+
+
+def _check_contacts(found: Sequence[FoundContact], source: str) -> None:
+    """Refuse more contacts or points than a session may have (``protocol.messages``' caps).
+
+    Raises:
+        DescriptionLimitError: Over :data:`~protocol.messages.MAX_CONTACTS`,
+            :data:`~protocol.messages.MAX_POINTS_PER_CONTACT` or
+            :data:`~protocol.messages.MAX_CONTACT_POINTS`.
+    """
+    where = f"(contacts from the {source})" if source != "given" else ""
+    if len(found) > MAX_CONTACTS:
+        raise DescriptionLimitError(
+            f"{len(found)} contacts {where}; at most {MAX_CONTACTS}: name the feet (`contacts`)",
+            field="contacts",
+        )
+    for contact in found:
+        if len(contact.points_in_frame) > MAX_POINTS_PER_CONTACT:
+            raise DescriptionLimitError(
+                f"contact {contact.name[:100]!r} has {len(contact.points_in_frame)} points; at "
+                f"most {MAX_POINTS_PER_CONTACT}",
+                field="contacts",
+            )
+    total = sum(len(contact.points_in_frame) for contact in found)
+    if total > MAX_CONTACT_POINTS:
+        raise DescriptionLimitError(
+            f"the contacts have {total} points together {where}; at most {MAX_CONTACT_POINTS}",
+            field="contacts",
+        )
 
 
 def foot_candidates(model: pin.Model, data: pin.Data, bodies: Sequence[Body]) -> list[str]:
@@ -751,11 +974,7 @@ def _check_unreadable_meshes(
         looked_at = set()
         for spec in contacts:
             if spec.points_in_frame is None and model.existFrame(spec.frame):
-                frame = model.frames[model.getFrameId(spec.frame)]
-                body_frame = (
-                    model.getFrameId(spec.frame) if frame.type == pin.BODY else frame.parentFrame
-                )
-                top = next((i for i, b in enumerate(bodies) if b.frame_id == body_frame), None)
+                top = _body_of_frame(model, bodies, model.getFrameId(spec.frame))
                 if top is not None:
                     looked_at |= {bodies[i].name for i in subtree(bodies, top)}
         why = "part of a named foot"
@@ -782,6 +1001,7 @@ def _check_unreadable_meshes(
 
 def _read_mjcf(text: bytes | str, read: FileReader | None) -> _Draft:
     _, mj = compile_mjcf(text, read)
+    _check_size(mj.nbody, mj.nv, "bodies")
     root = _robot_root(mj)
     builder = _PinocchioFromMujoco(mj, root)
     model = builder.model
@@ -804,6 +1024,21 @@ def _read_mjcf(text: bytes | str, read: FileReader | None) -> _Draft:
         sole_sites=builder.sole_sites(),
         warnings=warnings,
     )
+
+
+def _check_size(bodies: int, dofs: int, what: str) -> None:
+    """Refuse a model of more than :data:`MAX_BODIES` bodies or :data:`MAX_DOF` DoF.
+
+    Raises:
+        DescriptionLimitError: Over either cap.
+    """
+    if bodies > MAX_BODIES:
+        raise DescriptionLimitError(f"the model has {bodies} {what}; at most {MAX_BODIES}")
+    if dofs > MAX_DOF:
+        raise DescriptionLimitError(
+            f"the model has {dofs} degrees of freedom (nv, the free base's 6 included); at "
+            f"most {MAX_DOF}"
+        )
 
 
 def _robot_root(mj: mujoco.MjModel) -> int:
@@ -929,9 +1164,9 @@ class _PinocchioFromMujoco:
         parent = self._body_index.get(int(mj.body_parentid[body]), -1)
         parent_frame = self.bodies[parent].frame_id if parent >= 0 else 0
         frame = model.addBodyFrame(name, joint, body_in_joint, parent_frame)
-        for site in range(mj.nsite):
+        for site in map(int, np.flatnonzero(mj.site_bodyid == body)):
             site_name = mj.site(site).name
-            if mj.site_bodyid[site] == body and site_name and site_name not in self._body_names:
+            if site_name and site_name not in self._body_names:
                 placement = body_in_joint * _se3(mj.site_pos[site], mj.site_quat[site])
                 frame_id = model.addFrame(
                     pin.Frame(mj.site(site).name, joint, frame, placement, pin.OP_FRAME)
@@ -1008,8 +1243,8 @@ def _joint_model(kind: int, axis: np.ndarray) -> pin.JointModel:
 def _geom_shapes(mj: mujoco.MjModel, body: int) -> list[np.ndarray]:
     """Points and radii (``(k, 4)`` each) of a body's colliding geoms, in the body frame."""
     shapes = []
-    for geom in range(mj.ngeom):
-        if mj.geom_bodyid[geom] != body or not (mj.geom_contype[geom] or mj.geom_conaffinity[geom]):
+    for geom in map(int, np.flatnonzero(mj.geom_bodyid == body)):
+        if not (mj.geom_contype[geom] or mj.geom_conaffinity[geom]):
             continue
         local = _shape_points(int(mj.geom_type[geom]), mj.geom_size[geom], _mesh_vertices(mj, geom))
         if local is not None:
@@ -1116,6 +1351,7 @@ def _read_urdf(text: bytes | str, read: FileReader | None, name: str) -> _Draft:
     root = _parse_xml(text, "the URDF")
     if root.tag != "robot":
         raise DescriptionError(f"a URDF file's root element is <robot>, not <{root.tag}>")
+    _check_size(len(root.findall("link")), 0, "links")
     try:
         model = pin.buildModelFromXML(
             text.decode() if isinstance(text, bytes) else text, pin.JointModelFreeFlyer()
@@ -1125,6 +1361,8 @@ def _read_urdf(text: bytes | str, read: FileReader | None, name: str) -> _Draft:
         raise DescriptionError(
             f"Pinocchio could not parse the URDF {name!r}: {' '.join(message.split())}"
         ) from None
+    _check_size(len(root.findall("link")), model.nv, "links")
+    read = _counting(read)
     root_offset = model.jointPlacements[1].copy()
     model.jointPlacements[1] = pin.SE3.Identity()
     torque_limit = np.asarray(model.effortLimit[6:], dtype=float).copy()
@@ -1173,6 +1411,23 @@ def _read_urdf(text: bytes | str, read: FileReader | None, name: str) -> _Draft:
     return draft
 
 
+def _counting(read: FileReader | None) -> FileReader | None:
+    """``read``, refusing once the bytes it returned exceed :data:`MAX_ASSET_BYTES`.
+
+    A URDF names a mesh once per collision element, and each naming is loaded by MuJoCo.
+    """
+    if read is None:
+        return None
+    cost = _Cost()
+
+    def counted(path: str) -> bytes:
+        data = read(path)
+        cost.add_file(path, data, 1)
+        return data
+
+    return counted
+
+
 @dataclass(frozen=True)
 class _UnreadableMesh:
     """A URDF collision mesh left out: its link, ``filename`` as written, and why."""
@@ -1213,6 +1468,8 @@ def _urdf_collision_shape(
     elif shape.tag == "mesh":
         try:
             local = _urdf_mesh_points(shape, read)
+        except DescriptionLimitError:
+            raise
         except DescriptionError as exc:
             return None, (shape.get("filename", ""), str(exc))
     else:
@@ -1227,7 +1484,7 @@ def _urdf_mesh_points(mesh: ET.Element, read: FileReader | None) -> np.ndarray |
         DescriptionError: The file cannot be read, or MuJoCo cannot load it.
     """
     filename = mesh.get("filename", "")
-    key = f"mesh{PurePosixPath(filename).suffix.lower()}"
+    key = f"mesh{_safe_suffix(filename)}"  # the file's name never reaches MuJoCo's parser
     data = _read_or_say_why(read, filename)
     try:
         # Numbers only into the XML: the URDF's text never reaches MuJoCo's parser.
@@ -1411,6 +1668,32 @@ def _sole(
     return corners[np.sort(first)]
 
 
+def _body_of_frame(model: pin.Model, bodies: Sequence[Body], frame_id: int) -> int | None:
+    """Index in ``bodies`` of the body a frame is on (``None``: none, e.g. the world's).
+
+    A body's frame is its own; a joint's is the body the joint moves (the first on it);
+    any other frame's is the nearest body frame it hangs from.
+    """
+    index = {body.frame_id: i for i, body in enumerate(bodies)}
+    frame = model.frames[frame_id]
+    if frame.type == pin.JOINT:
+        return next(
+            (
+                i
+                for i, b in enumerate(bodies)
+                if model.frames[b.frame_id].parentJoint == frame.parentJoint
+            ),
+            None,
+        )
+    for _ in range(len(model.frames)):
+        if frame_id in index:
+            return index[frame_id]
+        if frame_id == 0:
+            return None
+        frame_id = model.frames[frame_id].parentFrame
+    return None
+
+
 def _named_contact(
     spec: ContactSpec, model: pin.Model, data: pin.Data, bodies: Sequence[Body]
 ) -> FoundContact:
@@ -1419,6 +1702,12 @@ def _named_contact(
             spec.frame, [f.name for f in model.frames if f.type in (pin.BODY, pin.OP_FRAME)]
         )
     frame_id = model.getFrameId(spec.frame)
+    if model.frames[frame_id].parentJoint == 0:
+        raise DescriptionError(
+            f"frame {spec.frame[:100]!r} is fixed in the world, not part of the robot: name a "
+            "body, site or joint of the robot",
+            field="contacts",
+        )
     if spec.points_in_frame is not None:
         return FoundContact(
             spec.name,
@@ -1427,9 +1716,13 @@ def _named_contact(
             spec.friction_coefficient,
             reason="named, with its points",
         )
-    frame = model.frames[frame_id]
-    body_frame = frame_id if frame.type == pin.BODY else frame.parentFrame
-    top = next(i for i, b in enumerate(bodies) if b.frame_id == body_frame)
+    top = _body_of_frame(model, bodies, frame_id)
+    if top is None:
+        raise DescriptionError(
+            f"frame {spec.frame[:100]!r} is on no body of the robot to find a sole on: name a "
+            "body or site, or give the contact's points",
+            field="contacts",
+        )
     return FoundContact(
         spec.name,
         spec.frame,

@@ -28,10 +28,17 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from controller_server.errors import FrameNotFound, ModelError, ModelNotFound, ServerFault
+from controller_server.errors import (
+    FrameNotFound,
+    ModelError,
+    ModelNotFound,
+    ModelTooLarge,
+    ServerFault,
+)
 from controller_server.files import ServerFileKind, display_name, model_directories
 from controller_server.models.description import (
     DescriptionError,
+    DescriptionLimitError,
     FileReader,
     FoundContact,
     FrameNotFoundError,
@@ -286,6 +293,9 @@ def load_robot_model(
     Raises:
         ModelError: Not found (one message whatever the reason), not
             parseable, unsupported joints, no contacts or no such keyframe.
+        ModelTooLarge: Over a cap of :mod:`~controller_server.models.description`
+            (XML nesting and elements, bodies, DoF, file bytes, image pixels) or of
+            ``protocol.messages`` (contacts and their points).
         FileTooLarge: A file over the size cap.
     """
     if model_text is not None:
@@ -315,6 +325,8 @@ def load_robot_model(
 
     try:
         files = gather_files(text, model_format, reading)
+    except DescriptionLimitError as exc:
+        raise ModelTooLarge(str(exc), field=exc.field) from None
     except DescriptionError as exc:
         raise ModelError(str(exc)) from None
     contacts_json = None if contacts is None else _contacts_json(contacts)
@@ -437,6 +449,8 @@ def _load_uncached(
         )
     except FrameNotFoundError as exc:
         raise FrameNotFound(exc.frame, exc.available) from None
+    except DescriptionLimitError as exc:
+        raise ModelTooLarge(str(exc), field=exc.field) from None
     except DescriptionError as exc:
         raise ModelError(str(exc), field=exc.field) from None
     model = description.model

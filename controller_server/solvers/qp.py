@@ -54,6 +54,9 @@ def solve_qp_bounded(
     directly with exactly the arguments ``qpsolvers`` would pass it: its checks and
     conversions cost more than the solve of a small level.
 
+    A problem without unknowns (no contact force when no foot is in support) is solved
+    here, for every solver: quadprog indexes out of bounds and ProxQP refuses a size of 0.
+
     Raises:
         qpsolvers.exceptions.QPError: As :func:`qpsolvers.solve_problem` (unknown solver,
             inconsistent problem).
@@ -61,6 +64,8 @@ def solve_qp_bounded(
     limits = QP_ITERATION_LIMITS.get(solver, {})
     capped = {**settings, **{key: min(cap, settings.get(key, cap)) for key, cap in limits.items()}}
     P, q, G, h, A, b, lb, ub = problem.unpack()
+    if q.size == 0:
+        return _solve_empty(problem, h, b)
     if (
         solver == "daqp"
         and _daqp_solve is not None
@@ -99,6 +104,22 @@ def solve_qp_bounded(
         x=np.array(model.results.x),
         solve_time=time.perf_counter() - start,
     )
+
+
+def _solve_empty(
+    problem: qpsolvers.Problem, h: np.ndarray | None, b: np.ndarray | None
+) -> qpsolvers.Solution:
+    """The QP of no unknowns: ``x = []``, found if ``0 ≤ h`` and ``b = 0`` (rows of no unknown)."""
+    solution = qpsolvers.Solution(problem)
+    h = np.zeros(0) if h is None else np.asarray(h, float)
+    b = np.zeros(0) if b is None else np.asarray(b, float)
+    solution.found = bool(np.all(h >= 0.0) and np.all(b == 0.0))
+    if solution.found:
+        solution.x = np.zeros(0)
+        solution.obj = 0.0
+        solution.z, solution.y, solution.z_box = np.zeros(h.size), np.zeros(b.size), np.zeros(0)
+    solution.build_time = solution.solve_time = 0.0
+    return solution
 
 
 def _solve_daqp(
