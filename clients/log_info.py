@@ -12,15 +12,15 @@ import dataclasses
 import os
 import textwrap
 from collections import Counter
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from clients.replay import recorded_session
+from clients.replay import read_recorded
 from protocol.messages import Command, Hello, State, Welcome
-from protocol.recording import BadLog, LoggedMessage, LogReader, read_log
+from protocol.recording import BadLog, read_log
 
 __all__ = ["LogSummary", "SessionSummary", "format_summary", "plot_log", "summarize_log"]
 
@@ -52,20 +52,6 @@ class LogSummary:
         return states / self.duration_s if self.duration_s > 0 else 0.0
 
 
-PROGRESS_EVERY = 1000
-"""Messages read between two calls of a progress callback."""
-
-
-def _reporting(
-    reader: LogReader, progress: Callable[[float], None] | None
-) -> Iterator[LoggedMessage]:
-    """``reader``'s messages, telling ``progress`` the fraction of the file read now and then."""
-    for index, logged in enumerate(reader):
-        if progress is not None and index % PROGRESS_EVERY == 0:
-            progress(reader.fraction_read)
-        yield logged
-
-
 def summarize_log(
     path: str | os.PathLike[str], progress: Callable[[float], None] | None = None
 ) -> LogSummary:
@@ -81,7 +67,7 @@ def summarize_log(
     summary = LogSummary()
     first_ns = last_ns = None
     awaiting_welcome = False
-    for logged in _reporting(read_log(path), progress):
+    for logged in read_log(path).reporting(progress):
         summary.messages += 1
         summary.counts[f"{logged.message.type} {logged.direction}"] += 1
         first_ns = logged.time_ns if first_ns is None else first_ns
@@ -135,6 +121,8 @@ def format_summary(path: str | os.PathLike[str], summary: LogSummary) -> str:
             ) or [f"    {key}"]
     for key, count in sorted(summary.counts.items()):
         lines.append(f"  {key:<20}{count:>8}")
+    if not summary.counts["command sent"] + summary.counts["command received"]:
+        lines.append("  no recorded command: `poise replay` has nothing to compare")
     return "\n".join(lines)
 
 
@@ -154,7 +142,7 @@ def plot_log(
     """
     from clients.sim.plots import PlotSeries, dof_names, plot_series
 
-    session = recorded_session(path, _reporting(read_log(path), progress))
+    session = read_recorded(path, progress).session
     time_s, commands = [], []
     for _, request in session.requests:
         reply = session.replies.get(request.seq)

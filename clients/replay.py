@@ -38,9 +38,12 @@ from protocol.recording import LoggedMessage, read_log
 
 __all__ = [
     "COMPARED_FIELDS",
+    "RecordedLog",
     "RecordedSession",
     "ReplayError",
     "ReplayReport",
+    "load_replay",
+    "read_recorded",
     "recorded_session",
     "replay_log",
 ]
@@ -150,6 +153,80 @@ def recorded_session(
     return RecordedSession(hello, welcome, requests, replies)
 
 
+@dataclasses.dataclass
+class RecordedLog:
+    """A log read to its end and checked: its first session, ready to replay or plot.
+
+    Attributes:
+        path: The log.
+        session: Its first session.
+        messages_read: Messages in the whole file.
+        truncated: The log ends early (its recorder was killed).
+    """
+
+    path: Path
+    session: RecordedSession
+    messages_read: int
+    truncated: bool
+
+    @property
+    def comparable_commands(self) -> int:
+        """Recorded states answered by a recorded command: what a replay compares."""
+        replies = self.session.replies
+        return sum(
+            isinstance(request, State) and isinstance(replies.get(request.seq), Command)
+            for _, request in self.session.requests
+        )
+
+
+def read_recorded(
+    path: str | os.PathLike[str], progress: Callable[[float], None] | None = None
+) -> RecordedLog:
+    """Read the whole log (corruption anywhere in it is found now) and keep its first session.
+
+    Args:
+        path: The MCAP log.
+        progress: Optional callable told the fraction of the file read (0 to 1).
+
+    Raises:
+        BadLog: Not a log, or a corrupt one.
+        ReplayError: The log holds no hello answered by a welcome.
+    """
+    reader = read_log(path)
+    messages = reader.reporting(progress)
+    session = recorded_session(path, messages)
+    for _ in messages:
+        pass  # the sessions after the first: read to the end, so corruption there is found too
+    return RecordedLog(Path(path), session, reader.messages_read, reader.truncated)
+
+
+def load_replay(
+    path: str | os.PathLike[str], progress: Callable[[float], None] | None = None
+) -> RecordedLog:
+    """Read and check a log for a replay, before any server is involved.
+
+    Raises:
+        BadLog: Not a log, or a corrupt one.
+        ReplayError: No recorded handshake, another protocol version, or no recorded
+            command to compare (a replay of it would compare nothing: no pass).
+    """
+    recorded = read_recorded(path, progress)
+    hello = recorded.session.hello
+    if hello.version != PROTOCOL_VERSION:
+        raise ReplayError(
+            f"{str(path)!r} was recorded with protocol version {hello.version}; this Poise "
+            f"speaks version {PROTOCOL_VERSION}: replay it with the Poise that recorded it, "
+            'or re-record it (docs/recording.md, "When replay fails")'
+        )
+    if recorded.comparable_commands == 0:
+        states = sum(isinstance(request, State) for _, request in recorded.session.requests)
+        raise ReplayError(
+            f"{str(path)!r} holds no commands to compare ({states} recorded states, none "
+            "answered by a recorded command): nothing to replay"
+        )
+    return recorded
+
+
 def _compare(new: Command, old: Command, atol: float, rtol: float, report: ReplayReport) -> None:
     fields = []
     for name in COMPARED_FIELDS:
@@ -177,7 +254,7 @@ def _compare(new: Command, old: Command, atol: float, rtol: float, report: Repla
 
 
 def replay_log(
-    path: str | os.PathLike[str],
+    log: str | os.PathLike[str] | RecordedLog,
     endpoint: str,
     *,
     atol: float = 1e-9,
@@ -192,7 +269,8 @@ def replay_log(
     """Replay the first session of a log against the server at ``endpoint``.
 
     Args:
-        path: MCAP log written by :class:`~protocol.recording.Recorder`.
+        log: MCAP log written by :class:`~protocol.recording.Recorder`, or one
+            :func:`load_replay` read already (read it before starting a server).
         endpoint: Server to replay against.
         atol: Absolute tolerance per entry.
         rtol: Relative tolerance per entry.
@@ -207,20 +285,17 @@ def replay_log(
             states of the log and the commands of this server (a live view).
 
     Raises:
-        BadLog: Not a log.
-        ReplayError: No recorded handshake, another protocol version, or a server
-            that refuses the recorded hello (another model hash: the detail says which).
+        BadLog: Not a log, or a corrupt one.
+        ReplayError: No recorded handshake, another protocol version, no recorded
+            command to compare, or a server that refuses the recorded hello
+            (another model hash: the detail says which).
     """
-    reader = read_log(path)
-    recorded = recorded_session(path, reader)
+    recorded_log = log if isinstance(log, RecordedLog) else load_replay(log)
+    path, recorded = recorded_log.path, recorded_log.session
     hello = recorded.hello
-    if hello.version != PROTOCOL_VERSION:
-        raise ReplayError(
-            f"{str(path)!r} was recorded with protocol version {hello.version}; this Poise "
-            f"speaks version {PROTOCOL_VERSION}: replay it with the Poise that recorded it, "
-            'or re-record it (docs/recording.md, "When replay fails")'
-        )
-    report = ReplayReport(messages_read=reader.messages_read, log_truncated=reader.truncated)
+    report = ReplayReport(
+        messages_read=recorded_log.messages_read, log_truncated=recorded_log.truncated
+    )
     with contextlib.ExitStack() as stack:
         client = stack.enter_context(ControllerClient(endpoint, timeout_s=timeout_s, curve=curve))
         fields = hello.model_dump(exclude={"type", "version", "seq"})

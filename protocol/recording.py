@@ -27,6 +27,12 @@ a chunk and flushes the file every ``flush_interval_s`` (and at once after a
 handshake, ``set_params``/``params``, ``error`` or ``bye`` message), so a
 process killed mid-run loses at most the messages of the last interval.
 :func:`read_log` reads such a truncated file up to its last complete chunk.
+
+Bad files: :func:`read_log` refuses, with :class:`BadLog`, a file that is not
+a regular file (never blocking on a FIFO), not MCAP, or corrupt anywhere (chunk
+CRCs, every record parsed, message indexes, a closed log's summary CRC and
+statistics), and a zstd bomb before decompressing it (:data:`MAX_CHUNK_BYTES`,
+:data:`MAX_EXPANSION`).
 """
 
 from __future__ import annotations
@@ -37,22 +43,43 @@ import logging
 import math
 import os
 import queue
+import stat
 import struct
 import threading
 import time
 import types
 import typing
-from collections.abc import Iterator
+import zlib
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from io import BytesIO
 from pathlib import Path
 from typing import Any, BinaryIO, Literal
 
 import numpy as np
 import orjson
-from mcap.exceptions import McapError
-from mcap.records import Channel, Header
+import zstandard
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import EndOfFile, McapError
+from mcap.opcode import Opcode
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    MessageIndex,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
 from mcap.records import Message as McapMessage
-from mcap.stream_reader import MAGIC_SIZE, StreamReader
+from mcap.stream_reader import MAGIC_SIZE
 from mcap.writer import CompressionType, Writer
 from pydantic import BaseModel, ValidationError
 
@@ -61,7 +88,10 @@ from protocol.messages import MESSAGE_TYPES, Message
 
 __all__ = [
     "CHUNK_SIZE",
+    "MAX_CHUNK_BYTES",
+    "MAX_EXPANSION",
     "QUEUE_LIMIT",
+    "SMALL_LOG_BYTES",
     "BadLog",
     "LogReader",
     "LoggedMessage",
@@ -391,36 +421,138 @@ class Recorder:
             log.error("recording to %s dropped a message: %s", self.path, reason)
 
 
-def _check_start(path: Path) -> None:
-    """Raise :class:`BadLog` unless the file starts with the MCAP magic and a header."""
+_MiB = 1024 * 1024
+MAX_CHUNK_BYTES = 256 * _MiB
+"""Largest decompressed chunk a reader accepts (bytes).
+
+A recorder's chunk holds :data:`CHUNK_SIZE` of messages plus at most one more,
+the largest a ``hello`` with its model's files inline (a few MB at
+``poise serve``'s default limits): a chunk declaring more is refused before
+it is decompressed.
+"""
+MAX_EXPANSION = 100
+"""A log's chunks decompress to at most this many times the file's size.
+
+zstd makes a recorder's JSON 2 to 5 times smaller (2.3 for the committed
+fixtures); a file whose chunks declare more is a zstd bomb, refused before the
+chunk that passes the bound is decompressed.
+"""
+SMALL_LOG_BYTES = 64 * _MiB
+"""Decompressed bytes any log may hold whatever its size (a short log of a large model)."""
+
+_FILE_KINDS = {
+    stat.S_IFDIR: "a directory",
+    stat.S_IFIFO: "a FIFO (named pipe)",
+    stat.S_IFCHR: "a character device",
+    stat.S_IFBLK: "a block device",
+    stat.S_IFSOCK: "a socket",
+}
+_HEAD_BYTES = 9  # a record's opcode (1 byte) and length (8 bytes)
+
+
+def _open_log(path: Path) -> BinaryIO:
+    """Open a regular file for reading without ever blocking (a FIFO would wait for a writer)."""
     try:
-        with open(path, "rb") as file:
-            head = file.read(MAGIC_SIZE + 1)
+        descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
     except OSError as exc:
         raise BadLog(path, f"cannot read it ({exc.strerror or exc})") from None
+    mode = os.fstat(descriptor).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(descriptor)
+        kind = _FILE_KINDS.get(stat.S_IFMT(mode), "not a regular file")
+        raise BadLog(path, f"it is {kind}, not a regular file (a `.mcap` recording)")
+    return os.fdopen(descriptor, "rb")
+
+
+def _check_start(path: Path) -> None:
+    """Raise :class:`BadLog` unless a regular file starts with the MCAP magic and a header."""
+    with _open_log(path) as file:
+        try:
+            head = file.read(MAGIC_SIZE + 1)
+        except OSError as exc:
+            raise BadLog(path, f"cannot read it ({exc.strerror or exc})") from None
     if not head:
         raise BadLog(path, "the file is empty")
     if head[:MAGIC_SIZE] != _MCAP_MAGIC:
         raise BadLog(path, "no MCAP magic at its start (is it a `.mcap` recording?)")
-    if len(head) > MAGIC_SIZE and head[MAGIC_SIZE] != 0x01:  # the header record opcode
+    if len(head) > MAGIC_SIZE and head[MAGIC_SIZE] != Opcode.HEADER:
         raise BadLog(path, f"the MCAP magic is not followed by a header (opcode {head[8]:#x})")
+
+
+class _ExactStream(ReadDataStream):
+    """A record's bytes for mcap's record classes; a field that runs past them raises."""
+
+    def read(self, length: int) -> bytes:
+        data = super().read(length)
+        if len(data) != length:
+            raise EndOfFile()
+        return data
+
+
+_RECORD_TYPES: dict[int, Any] = {
+    Opcode.HEADER: Header,
+    Opcode.FOOTER: Footer,
+    Opcode.SCHEMA: Schema,
+    Opcode.CHANNEL: Channel,
+    Opcode.MESSAGE: McapMessage,
+    Opcode.CHUNK: Chunk,
+    Opcode.MESSAGE_INDEX: MessageIndex,
+    Opcode.CHUNK_INDEX: ChunkIndex,
+    Opcode.ATTACHMENT: Attachment,
+    Opcode.ATTACHMENT_INDEX: AttachmentIndex,
+    Opcode.STATISTICS: Statistics,
+    Opcode.METADATA: Metadata,
+    Opcode.METADATA_INDEX: MetadataIndex,
+    Opcode.SUMMARY_OFFSET: SummaryOffset,
+    Opcode.DATA_END: DataEnd,
+}
+_PARSE_ERRORS = (McapError, ValueError, struct.error, EOFError)
+
+
+def _parse(opcode: int, data: bytes) -> Any:
+    """One record from its bytes (``None``: an opcode MCAP does not define, skipped)."""
+    record_type = _RECORD_TYPES.get(opcode)
+    if record_type is None:
+        return None
+    stream = _ExactStream(BytesIO(data))
+    if record_type is McapMessage:
+        return McapMessage.read(stream, len(data))
+    return record_type.read(stream)
 
 
 class LogReader:
     """The messages of a log in file order; iterate once.
 
-    A log cut short (the recording process was killed, so no summary or
-    footer) yields every message up to its last complete chunk, then logs a
+    Every chunk's CRC is checked, every record parsed in full, and a closed
+    log's summary CRC and statistics checked against what was read: a log
+    corrupt anywhere raises :class:`BadLog`, never yields a partial read as
+    if it were whole. A chunk is decompressed only if it declares at most
+    ``max_chunk_bytes`` and the chunks so far at most ``max_expansion`` times
+    the file's size (at least :data:`SMALL_LOG_BYTES`), so memory stays
+    bounded whatever the file claims.
+
+    A log cut short (the recording process was killed, so no footer at its
+    end) yields every message up to its last complete chunk, then logs a
     warning on ``poise.record`` naming how many messages were read; after the
     iteration :attr:`truncated` says so and :attr:`messages_read` counts them.
+    A file that ends with the MCAP magic was closed by its recorder: a record
+    in it that runs past the end is corruption, not a cut.
 
     Raises (while iterating):
-        BadLog: A message that is not a Poise message, or an MCAP file written
-            by another program.
+        BadLog: A corrupt file, a message that is not a Poise message, or an
+            MCAP file written by another program.
     """
 
-    def __init__(self, path: Path):
+    def __init__(
+        self,
+        path: Path,
+        *,
+        max_chunk_bytes: int = MAX_CHUNK_BYTES,
+        max_expansion: float = MAX_EXPANSION,
+    ):
         self.path = path
+        self.max_chunk_bytes = max_chunk_bytes
+        self.max_expansion = max_expansion
         self.messages_read = 0
         self.truncated = False
         self.stopped_at_byte: int | None = None
@@ -428,6 +560,9 @@ class LogReader:
         self._file: BinaryIO | None = None
         self._size_bytes = 0
         self._finished = False
+        self._decompressed_bytes = 0
+        self._chunks_read = 0
+        self._channels: dict[int, Channel] = {}
 
     @property
     def fraction_read(self) -> float:
@@ -438,52 +573,236 @@ class LogReader:
             return 0.0
         return min(1.0, self._file.tell() / self._size_bytes)
 
+    def reporting(
+        self, progress: Callable[[float], None] | None, every: int = 1000
+    ) -> Iterator[LoggedMessage]:
+        """The messages, telling ``progress`` the fraction read after every ``every`` of them."""
+        for index, logged in enumerate(self):
+            if progress is not None and index % every == 0:
+                progress(self.fraction_read)
+            yield logged
+
     def __iter__(self) -> Iterator[LoggedMessage]:
-        channels: dict[int, Channel] = {}
-        with open(self.path, "rb") as file:
-            self._file, self._size_bytes = file, os.fstat(file.fileno()).st_size
-            records = StreamReader(file, validate_crcs=True).records
-            while True:
-                try:
-                    record = next(records)
-                except StopIteration:
-                    break
-                except (McapError, ValueError, EOFError, struct.error, OSError, MemoryError) as exc:
-                    self._cut_short(exc, file.tell())
-                    break
-                if isinstance(record, Header) and record.library != "poise":
-                    raise BadLog(
-                        self.path, f"written by {record.library!r}, not by a Poise recorder"
-                    )
-                if isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, McapMessage):
-                    self.messages_read += 1
-                    yield _logged(self.path, channels, record)
+        with _open_log(self.path) as file:
+            self._file = file
+            self._size_bytes = size = os.fstat(file.fileno()).st_size
+            closed = False
+            if size >= 2 * MAGIC_SIZE:
+                file.seek(size - MAGIC_SIZE)
+                closed = file.read(MAGIC_SIZE) == _MCAP_MAGIC
+                file.seek(0)
+            yield from self._read(file, size, closed)
         self._file, self._finished = None, True
 
-    def _cut_short(self, exc: BaseException, offset: int) -> None:
+    def _read(self, file: BinaryIO, size: int, closed: bool) -> Iterator[LoggedMessage]:
+        if file.read(MAGIC_SIZE) != _MCAP_MAGIC:
+            raise BadLog(self.path, "no MCAP magic at its start (is it a `.mcap` recording?)")
+        offset = MAGIC_SIZE
+        summary_crc: int | None = None  # of the bytes after the data section, once it ended
+        chunk_index: dict[int, list[tuple[int, int]]] = {}  # the last chunk's, to check
+        while True:
+            head = file.read(_HEAD_BYTES)
+            if len(head) < _HEAD_BYTES:
+                self._end_early(closed, offset, f"the file ends at byte {offset} without a footer")
+                return
+            opcode, length = struct.unpack("<BQ", head)
+            if length > size - offset - _HEAD_BYTES:
+                self._end_early(
+                    closed, offset, f"the record at byte {offset} runs past the end of the file"
+                )
+                return
+            if length > 2 * self.max_chunk_bytes:  # a chunk's data is about its size, or less
+                raise BadLog(
+                    self.path,
+                    f"the record at byte {offset} declares {length} bytes: a corrupt file",
+                )
+            data = file.read(length)
+            if summary_crc is not None:
+                summary_crc = zlib.crc32(
+                    head + (data[:-4] if opcode == Opcode.FOOTER else data), summary_crc
+                )
+            try:
+                record = _parse(opcode, data)
+            except _PARSE_ERRORS as exc:
+                raise self._corrupt(
+                    f"its {_opcode_name(opcode)} record at byte {offset} does not parse", exc
+                ) from None
+            if offset == MAGIC_SIZE and not isinstance(record, Header):
+                raise BadLog(self.path, "the MCAP magic is not followed by a header")
+            if isinstance(record, Header) and record.library != "poise":
+                raise BadLog(self.path, f"written by {record.library!r}, not by a Poise recorder")
+            if isinstance(record, Chunk):
+                chunk_index = {}
+                yield from self._chunk_records(record, offset, chunk_index)
+            elif isinstance(record, MessageIndex):
+                self._check_index(record, chunk_index, offset)
+            elif isinstance(record, Channel | McapMessage):
+                unchunked = self._record(record, {}, 0)  # outside a chunk: no index to check
+                if unchunked is not None:
+                    yield unchunked
+            elif isinstance(record, DataEnd):
+                summary_crc = 0
+            elif isinstance(record, Statistics):
+                self._check_statistics(record)
+            elif isinstance(record, Footer):
+                if summary_crc is not None and record.summary_crc not in (0, summary_crc):
+                    raise BadLog(
+                        self.path, "its summary section does not match its CRC: the file is corrupt"
+                    )
+                tail = file.read(MAGIC_SIZE + 1)
+                if tail != _MCAP_MAGIC:
+                    if closed or not _MCAP_MAGIC.startswith(tail):
+                        raise BadLog(
+                            self.path,
+                            "its footer is not followed by the MCAP magic: the file is corrupt",
+                        )
+                    self._end_early(closed, offset, "the file ends in its closing magic")
+                return
+            offset += _HEAD_BYTES + length
+
+    def _chunk_records(
+        self, chunk: Chunk, offset: int, chunk_index: dict[int, list[tuple[int, int]]]
+    ) -> Iterator[LoggedMessage]:
+        """The messages of one chunk, decompressed within the bounds, its CRC checked."""
+        self._chunks_read += 1
+        where = f"the chunk at byte {offset}"
+        if chunk.uncompressed_size > self.max_chunk_bytes:
+            raise BadLog(
+                self.path,
+                f"{where} declares {chunk.uncompressed_size / _MiB:.0f} MiB decompressed, more "
+                f"than a reader takes ({self.max_chunk_bytes / _MiB:.0f} MiB): a zstd bomb?",
+            )
+        budget = max(self.max_expansion * self._size_bytes, SMALL_LOG_BYTES)
+        self._decompressed_bytes += chunk.uncompressed_size
+        if self._decompressed_bytes > budget:
+            raise BadLog(
+                self.path,
+                f"its chunks declare {self._decompressed_bytes / _MiB:.0f} MiB decompressed, "
+                f"more than a reader takes from a {self._size_bytes / _MiB:.1f} MiB file "
+                f"({self.max_expansion:g} times its size, at least "
+                f"{SMALL_LOG_BYTES / _MiB:.0f} MiB): a zstd bomb?",
+            )
+        data = self._decompress(chunk, where)
+        if chunk.uncompressed_crc not in (0, zlib.crc32(data)):
+            raise BadLog(self.path, f"{where} does not match its CRC: the file is corrupt")
+        stream = _ExactStream(BytesIO(data))
+        while stream.count < len(data):
+            start = stream.count
+            try:
+                opcode, length = stream.read1(), stream.read8()
+                record = _parse(opcode, stream.read(length))
+            except _PARSE_ERRORS as exc:
+                raise self._corrupt(f"a record in {where} does not parse", exc) from None
+            if isinstance(record, Channel | McapMessage):
+                message = self._record(record, chunk_index, start)
+                if message is not None:
+                    yield message
+
+    def _decompress(self, chunk: Chunk, where: str) -> bytes:
+        """The chunk's records, never more than its declared size of them."""
+        if chunk.compression == "":
+            data = chunk.data
+        elif chunk.compression == "zstd":
+            try:
+                with zstandard.ZstdDecompressor().stream_reader(chunk.data) as reader:
+                    data = reader.read(chunk.uncompressed_size + 1)
+            except zstandard.ZstdError as exc:
+                raise self._corrupt(f"{where} does not decompress", exc) from None
+        else:
+            raise BadLog(
+                self.path, f"{where} is compressed with {chunk.compression!r}; Poise writes zstd"
+            )
+        if len(data) != chunk.uncompressed_size:
+            more = "more" if len(data) > chunk.uncompressed_size else "fewer"
+            raise BadLog(
+                self.path,
+                f"{where} decompresses to {more} bytes than the {chunk.uncompressed_size} it "
+                "declares: the file is corrupt",
+            )
+        return data
+
+    def _record(
+        self, record: Channel | McapMessage, chunk_index: dict[int, list[tuple[int, int]]], at: int
+    ) -> LoggedMessage | None:
+        if isinstance(record, Channel):
+            self._channels[record.id] = record
+            return None
+        chunk_index.setdefault(record.channel_id, []).append((record.log_time, at))
+        self.messages_read += 1
+        return _logged(self.path, self._channels, record)
+
+    def _check_index(
+        self, index: MessageIndex, chunk_index: dict[int, list[tuple[int, int]]], offset: int
+    ) -> None:
+        """A chunk's message index names the messages read from it (times and offsets)."""
+        if sorted(index.records) != sorted(chunk_index.get(index.channel_id, [])):
+            raise BadLog(
+                self.path,
+                f"the message index at byte {offset} does not match its chunk: the file is corrupt",
+            )
+
+    def _check_statistics(self, statistics: Statistics) -> None:
+        if (statistics.message_count, statistics.chunk_count) != (
+            self.messages_read,
+            self._chunks_read,
+        ):
+            raise BadLog(
+                self.path,
+                f"its summary counts {statistics.message_count} messages in "
+                f"{statistics.chunk_count} chunks, the file holds {self.messages_read} in "
+                f"{self._chunks_read}: the file is corrupt",
+            )
+
+    def _corrupt(self, what: str, exc: BaseException) -> BadLog:
+        reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+        return BadLog(self.path, f"{what} ({reason}): the file is corrupt")
+
+    def _end_early(self, closed: bool, offset: int, what: str) -> None:
+        """The file ends before its footer: a recorder killed mid-run, unless it was closed."""
+        if closed:
+            raise BadLog(
+                self.path,
+                f"{what}, though its recorder closed it (it ends with the MCAP magic): "
+                "the file is corrupt",
+            )
         self.truncated = True
         self.stopped_at_byte = offset
-        reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         log.warning(
             "%s ends early (killed mid-recording?): read %d messages, stopped at byte %d (%s)",
             self.path,
             self.messages_read,
             offset,
-            reason,
+            what,
         )
 
 
-def read_log(path: str | os.PathLike[str]) -> LogReader:
+def _opcode_name(opcode: int) -> str:
+    try:
+        return Opcode(opcode).name.lower().replace("_", " ")
+    except ValueError:
+        return f"opcode {opcode:#x}"
+
+
+def read_log(
+    path: str | os.PathLike[str],
+    *,
+    max_chunk_bytes: int = MAX_CHUNK_BYTES,
+    max_expansion: float = MAX_EXPANSION,
+) -> LogReader:
     """The messages of a log, in file order (see :class:`LogReader`).
 
+    Args:
+        path: The log.
+        max_chunk_bytes: Largest decompressed chunk accepted.
+        max_expansion: Largest ratio of decompressed chunks to file size.
+
     Raises:
-        BadLog: The file is empty, not MCAP, or does not start with an MCAP header.
+        BadLog: The file is not a regular file, is empty, not MCAP, or does not
+            start with an MCAP header (and, while iterating, see :class:`LogReader`).
     """
     file_path = Path(path)
     _check_start(file_path)
-    return LogReader(file_path)
+    return LogReader(file_path, max_chunk_bytes=max_chunk_bytes, max_expansion=max_expansion)
 
 
 def _logged(path: Path, channels: dict[int, Channel], record: McapMessage) -> LoggedMessage:

@@ -19,7 +19,12 @@ __all__ = ["EXIT_SERVER_LATE", "add_parsers"]
 
 EXIT_SERVER_LATE = 3
 """``poise replay``'s exit code when the server did not answer in time (0 match,
-1 regression, 2 a log that cannot be replayed or a usage mistake)."""
+1 regression, 2 a log that cannot be replayed or a usage mistake).
+
+A log that cannot be replayed is found before a server starts: not a regular file,
+not MCAP, corrupt anywhere (chunk CRCs, records, summary), a zstd bomb (chunks that
+declare more than the reader's bounds), no handshake, another protocol version, or
+no recorded command to compare (a replay that compares nothing is no pass)."""
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -28,7 +33,7 @@ def _replay(args: argparse.Namespace) -> int:
 
     from clients.client import ServerError, ServerTimeout
     from clients.progress import ProgressBar
-    from clients.replay import ReplayError, replay_log
+    from clients.replay import ReplayError, load_replay, replay_log
     from clients.sim.app import server_endpoint
     from protocol import ErrorCode
     from protocol.recording import BadLog
@@ -43,13 +48,16 @@ def _replay(args: argparse.Namespace) -> int:
         except json.JSONDecodeError:
             params[name] = value  # a bare word: a text parameter
     try:
+        # The whole log is read and checked before a server or a view starts.
+        with ProgressBar(f"{Path(args.log).name} (reading)") as bar:
+            recorded = load_replay(args.log, progress=bar)
         with (
             live_view(args) as observer,
             server_endpoint(args.connect, deadline_s=args.deadline) as endpoint,
             ProgressBar(Path(args.log).name) as bar,
         ):
             report = replay_log(
-                args.log,
+                recorded,
                 endpoint,
                 atol=args.atol,
                 rtol=args.rtol,
@@ -71,6 +79,8 @@ def _replay(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_SERVER_LATE
+    if report.compared == 0:  # load_replay refuses such a log; never report it as a match
+        raise UsageError(f"{args.log!r}: the replay compared no command: nothing was checked")
     if report.log_truncated:
         print(
             f"warning: the log ends early (its recorder was killed?): replayed the "
@@ -157,9 +167,10 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="replay a recorded log against a server and compare every command",
         description="Re-create the log's session from its recorded hello, send its states and "
         "set_params in order, compare each command with the recorded one (|new - old| <= "
-        "atol + rtol |old| per entry). Exit code 0 when every command matches, 1 on a "
-        "regression, 2 on a log that cannot be replayed (or a usage mistake), 3 when the "
-        "server could not answer in time.",
+        "atol + rtol |old| per entry). The whole log is read and checked before a server "
+        "starts. Exit code 0 when every command matches, 1 on a regression, 2 on a log that "
+        "cannot be replayed (corrupt, not a log, no command to compare) or a usage mistake, "
+        "3 when the server could not answer in time.",
     )
     replay.add_argument("log", metavar="LOG", help="MCAP log (`poise sim --record DIR`)")
     replay.add_argument(

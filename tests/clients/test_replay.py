@@ -138,11 +138,16 @@ def test_a_log_of_another_protocol_version_is_refused_saying_what_to_do(server, 
 
 
 def test_a_log_of_another_model_is_refused_saying_why(server, tmp_path):
-    welcome = next(m for m in sample_messages() if m.type == "welcome")
+    welcome, state, reply = (
+        next(m for m in sample_messages() if m.type == kind)
+        for kind in ("welcome", "state", "command")
+    )
     path = tmp_path / "other.mcap"
     with Recorder(path) as recorder:
         recorder.record(Hello(seq=1, model="thesis_humanoid"), "sent")
         recorder.record(welcome.model_copy(update={"model_hash": "0" * 64}), "received")
+        recorder.record(state, "sent")  # a command to compare: a log a replay would check
+        recorder.record(reply, "received")
     with pytest.raises(ReplayError, match=r"MODEL_MISMATCH.*recorded with"):
         replay_log(path, server.endpoint)
 
