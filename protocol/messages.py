@@ -98,8 +98,9 @@ MAX_CONTACT_POINTS = 64
 """Points of all the contacts of one session together.
 
 Each point adds force unknowns to every tick's QPs, whose cost grows faster than
-the points: on the 28-DoF built-in robot a weighted tick took 1.5 ms at 2 × 16
-points, 24 ms at 2 × 32, 140 ms at 2 × 64 and over 5 s at 2 × 5,000."""
+the points: on the 28-DoF built-in robot a ``momentum`` tick took 1.3 ms standing at
+2 × 16 points, 7.5 ms at 2 × 32 (25 ms on other states), 38 ms at 2 × 64 (0.17–1 s
+on other states) and over 5 s at 2 × 5,000 (docs/serving.md)."""
 
 ParamValue = float | int | bool | str | list[float] | dict[str, float | str | list[float]] | None
 """A controller parameter: a number, flag, name, vector, a small record

@@ -123,8 +123,8 @@ MAX_BODIES = 500
 """Bodies of a compiled MJCF (robot, props and world), links of a URDF."""
 MAX_DOF = 200
 """Degrees of freedom of a model (``nv``, a free base's 6 included): Talos has 38, a
-humanoid with two dexterous hands about 90. Loading and a tick take about 0.6 s and
-0.05–0.25 s at 200, 13–19 s and 0.4–0.9 s at 400."""
+humanoid with two dexterous hands about 90. Loading took 0.6 s at 198 and 13–19 s at
+398, a ``prioritized`` tick 24 ms and 0.4–0.9 s (docs/serving.md)."""
 MAX_ASSET_BYTES = 64 * 1024 * 1024
 """Bytes of the files a model's meshes, textures, height fields and skins read, a file
 counted each time it is named (MuJoCo compiles each naming): ~3 s of compiling."""
