@@ -238,10 +238,13 @@ def _print_table(reports: list[dict[str, Any]]) -> None:
     soles' clearance, the longest flight and the feet's turn. The model's notes come
     before, the scenarios' warnings after.
     """
-    notes = {(r["scenario"], note) for r in reports for note in r.get("model_notes", [])}
-    notes |= {(r["scenario"], note) for r in reports if (note := start_pose_note(r))}
-    for scenario, note in sorted(notes):
-        print(f"note ({scenario}): {note}")
+    notes: dict[str, list[str]] = {}  # a note, and the scenarios it is about, in run order
+    for r in reports:
+        for note in [*r.get("model_notes", []), start_pose_note(r)]:
+            if note and r["scenario"] not in notes.setdefault(note, []):
+                notes[note].append(r["scenario"])
+    for note, scenarios in notes.items():
+        print(f"note ({', '.join(scenarios)}): {note}")
     width = max([24, *(len(r["scenario"]) + 2 for r in reports)])
     kinds = list(dict.fromkeys(r["kind"] for r in reports))
     for index, kind in enumerate(kinds):
