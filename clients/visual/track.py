@@ -11,11 +11,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from clients.replay import recorded_session
+from clients.replay import read_recorded
 from clients.sim.runner import track_of_run
 from clients.track import Track, session_track
 from protocol.messages import Command, State
-from protocol.recording import BadLog, read_log
+from protocol.recording import BadLog
 
 __all__ = ["Track", "track_of_log", "track_of_run"]
 
@@ -32,7 +32,7 @@ def track_of_log(path: str | os.PathLike[str], model_dir: Path | None = None) ->
             IMU reading before any diagnostics estimated the base.
         ReplayError: The log holds no handshake.
     """
-    session = recorded_session(path, read_log(path))
+    session = read_recorded(path).session  # the whole log: corruption anywhere is found
     track = session_track(Path(path).stem, session.hello, session.welcome, "recorded", model_dir)
     for _, request in session.requests:
         reply = session.replies.get(request.seq)
