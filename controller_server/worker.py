@@ -231,7 +231,7 @@ class FairQueue:
 
 def _warm_up(max_model_bytes: int) -> None:
     """Open and close one session in a table of its own (imports and model cache are global)."""
-    table = SessionTable(max_model_bytes=max_model_bytes)
+    table = SessionTable(max_model_bytes=max_model_bytes, tick_budget_s=None)
     reply = table.handle(b"warm-up", encode(WARM_UP_HELLO))
     if isinstance(reply, Error):
         log.warning("warm-up failed: %s", reply.detail)
@@ -274,6 +274,7 @@ def run_worker(
         record_dir=config.record_dir,
         max_message_bytes=config.max_message_bytes,
         asset_dir=asset_dir,
+        tick_budget_s=config.deadline_s,  # a session whose tick could not meet it is refused
     )
     gc.freeze()
     requests = FairQueue()

@@ -203,15 +203,15 @@ def test_the_page_shows_the_robot_moving_while_a_run_goes_on(tmp_path):
 def write_swaying_log(path: Path, endpoint: str, duration_s: float, rate_hz: float) -> None:
     """A log of the thesis humanoid standing, its base swaying ±0.15 m, recorded at ``rate_hz``.
 
-    The handshake is a real server's; the states are written with the log
-    times of a client that sent them at ``rate_hz`` (no commands: nothing is
-    compared), so ``poise replay --realtime`` takes ``duration_s`` to send them.
+    The handshake and the commands are a real server's; they are written with
+    the log times of a client that sent the states at ``rate_hz``, so
+    ``poise replay --realtime`` takes ``duration_s`` to send them (and finds
+    what it compares equal).
     """
     hello = Hello(model="thesis_humanoid", diagnostics_period_ticks=10)
-    with ControllerClient(endpoint) as client:
-        welcome = client.connect("thesis_humanoid", diagnostics_period_ticks=10)
     start_ns = time.time_ns()
-    with Recorder(path) as recorder:
+    with ControllerClient(endpoint) as client, Recorder(path) as recorder:
+        welcome = client.connect("thesis_humanoid", diagnostics_period_ticks=10)
         recorder.record(hello, "sent", start_ns)
         recorder.record(welcome, "received", start_ns)
         standing = RobotState.standing(welcome)
@@ -222,11 +222,10 @@ def write_swaying_log(path: Path, endpoint: str, duration_s: float, rate_hz: flo
                 standing, position_base_in_world=standing.position_base_in_world + sway
             )
             message = state.to_message(time_s, [True] * len(welcome.contacts))
-            recorder.record(
-                message.model_copy(update={"seq": tick + 1}),
-                "sent",
-                start_ns + round(1e9 * (0.01 + time_s)),
-            )
+            command = client.step(message)
+            log_ns = start_ns + round(1e9 * (0.01 + time_s))
+            recorder.record(message.model_copy(update={"seq": client.last_seq}), "sent", log_ns)
+            recorder.record(command, "received", log_ns)
 
 
 @pytest.mark.browser
