@@ -173,7 +173,7 @@ def test_the_revolute_humanoid_stands_on_odrives(server):
     emulation = config.emulation.model_copy(update={"pushes": []})
     config = config.model_copy(update={"buses": buses, "joints": joints, "emulation": emulation})
     run = run_bridge(config, server.endpoint, emulate=True, duration_s=2.0)
-    assert run.fall_reason == "" and run.report.latches == []
+    assert run.fall_reason == "" and run.report.latches == [], (run.fall_reason, run.report)
     assert run.report.commands + run.report.server_timeouts == 1001  # late replies counted
     assert all(link.faults == 0 for link in run.report.links)
 
@@ -184,6 +184,6 @@ def test_the_revolute_humanoid_stands_through_the_bridge_in_mujoco(server):
     emulation = config.emulation.model_copy(update={"backend": "mujoco", "pushes": []})
     config = config.model_copy(update={"emulation": emulation})
     run = run_bridge(config, server.endpoint, emulate=True, duration_s=2.0)
-    assert run.fall_reason == "" and run.report.latches == []
+    assert run.fall_reason == "" and run.report.latches == [], (run.fall_reason, run.report)
     assert run.report.commands + run.report.server_timeouts == 1001  # late replies counted
-    assert sum(link.missed for link in run.report.links) == 0
+    assert sum(link.missed for link in run.report.links) == 0, run.report.links
