@@ -157,3 +157,17 @@ def yellow_pixels(image: np.ndarray) -> int:
 def moved(first: np.ndarray, later: np.ndarray) -> int:
     """Pixels that changed by more than the encoder's noise."""
     return int(np.count_nonzero(np.abs(first.astype(int) - later.astype(int)).max(axis=2) > 40))
+
+
+def box_stl(size_m) -> bytes:
+    """A binary STL of a box of ``size_m`` (x, y, z) centred on the origin."""
+    half = np.asarray(size_m) / 2
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
+    faces = [
+        (0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
+        (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3),
+    ]  # fmt: skip
+    record = np.dtype([("normal", "<f4", 3), ("vertices", "<f4", (3, 3)), ("attribute", "<u2")])
+    triangles = np.zeros(len(faces), dtype=record)
+    triangles["vertices"] = corners[np.array(faces)]
+    return b"\0" * 80 + np.uint32(len(faces)).tobytes() + triangles.tobytes()

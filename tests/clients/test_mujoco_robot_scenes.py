@@ -19,6 +19,7 @@ from clients.sim.mujoco_backend import MujocoBackend, UnsupportedModel  # noqa: 
 from clients.sim.runner import run_scenario  # noqa: E402
 from clients.sim.scenario import load_scenario  # noqa: E402
 from clients.state import RobotState  # noqa: E402
+from tests.helpers import box_stl  # noqa: E402
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
 DUMMY_SCENE = MODELS / "dummy_body_scene" / "scene.xml"
@@ -229,19 +230,10 @@ def test_an_srdf_gives_keyframes_to_check_and_pairs_to_exclude(tmp_path):
 # -- URDF meshes ---------------------------------------------------------------------------
 
 
-def box_stl(path: Path, size_m: tuple[float, float, float]) -> None:
-    """A binary STL of a box centred on the origin."""
-    half = np.asarray(size_m) / 2
-    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
-    faces = [
-        (0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
-        (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3),
-    ]  # fmt: skip
-    record = np.dtype([("normal", "<f4", 3), ("vertices", "<f4", (3, 3)), ("attribute", "<u2")])
-    triangles = np.zeros(len(faces), dtype=record)
-    triangles["vertices"] = corners[np.array(faces)]
+def write_box_stl(path: Path, size_m: tuple[float, float, float]) -> None:
+    """A binary STL of a box centred on the origin, written to ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(b"\0" * 80 + np.uint32(len(faces)).tobytes() + triangles.tobytes())
+    path.write_bytes(box_stl(size_m))
 
 
 def urdf_with_meshes(directory: Path, meshes: dict[str, str]) -> Path:
@@ -268,8 +260,8 @@ def mesh_extent_of(model, body: str) -> np.ndarray:
 
 
 def test_two_meshes_of_one_base_name_stay_two_meshes(tmp_path):
-    box_stl(tmp_path / "meshes" / "pelvis" / "base_link_collision.STL", (0.16, 0.28, 0.14))
-    box_stl(tmp_path / "meshes" / "torso" / "base_link_collision.STL", (0.2, 0.34, 0.42))
+    write_box_stl(tmp_path / "meshes" / "pelvis" / "base_link_collision.STL", (0.16, 0.28, 0.14))
+    write_box_stl(tmp_path / "meshes" / "torso" / "base_link_collision.STL", (0.2, 0.34, 0.42))
     path = urdf_with_meshes(
         tmp_path,
         {
@@ -287,9 +279,9 @@ def test_mesh_names_never_make_mujoco_read_the_disk(tmp_path, monkeypatch):
     """A quote in a file name reaches MuJoCo only escaped, and a mesh the reader could not read
     is dropped (noted), not opened by MuJoCo from the working directory."""
     robot_dir, elsewhere = tmp_path / "robot", tmp_path / "cwd"
-    box_stl(robot_dir / 'meshes/it"s.stl', (0.2, 0.34, 0.42))
+    write_box_stl(robot_dir / 'meshes/it"s.stl', (0.2, 0.34, 0.42))
     for decoy in ('it"s.stl', "s.stl", "head.stl", "meshes/head.stl"):
-        box_stl(elsewhere / decoy, (1.0, 1.0, 1.0))
+        write_box_stl(elsewhere / decoy, (1.0, 1.0, 1.0))
     path = urdf_with_meshes(robot_dir, {"torso": 'meshes/it"s.stl', "head": "meshes/head.stl"})
     monkeypatch.chdir(elsewhere)
     backend = MujocoBackend(str(path))
