@@ -95,8 +95,10 @@ class FileTooLarge(ServerFault):
 class ControllerFailed(ServerFault):
     """A controller found no command for a valid request; the session is kept.
 
-    Raised instead of numerical exceptions (``LinAlgError``, a solver giving up), with one
-    line saying what failed, so that no tick ends in an untyped error.
+    Raised instead of numerical exceptions (``LinAlgError``, a solver giving up, its time
+    budget spent), with one line saying what failed, so that no tick ends in an untyped
+    error. On the wire it is ``SOLVE_FAILED``: the state is the cause, not a bug of the
+    server (``INTERNAL``), and the client holds its safe behaviour.
     """
 
     def __init__(self, detail: str):
@@ -119,7 +121,7 @@ _WIRE_CODES: dict[type[ServerFault], ErrorCode] = {
     InvalidParams: ErrorCode.INVALID_PARAMS,
     UnknownController: ErrorCode.UNKNOWN_CONTROLLER,
     FileTooLarge: ErrorCode.LIMIT_EXCEEDED,
-    ControllerFailed: ErrorCode.INTERNAL,
+    ControllerFailed: ErrorCode.SOLVE_FAILED,
     EstimatorInputError: ErrorCode.INVALID_FIELD,
     ImuFrameError: ErrorCode.INVALID_FIELD,
 }

@@ -42,7 +42,13 @@ class ErrorCode(IntEnum):
     UNKNOWN_CONTROLLER = 11, "The controller named in `hello` does not exist."
     INVALID_PARAMS = 12, "A controller parameter is unknown or its value is out of range."
     UNEXPECTED_MESSAGE = 13, "A reply-only message (`welcome`, `command`, …) was sent as a request."
-    INTERNAL = 14, "The controller failed on a valid request; the session is kept."
+    INTERNAL = (
+        14,
+        (
+            "The server failed on a valid request (a bug: please report it with the request); "
+            "the session is kept."
+        ),
+    )
     DEADLINE_EXCEEDED = (
         15,
         (
@@ -64,6 +70,15 @@ class ErrorCode(IntEnum):
             "The server's asset cache lacks files `hello.model_asset_hashes` names (or this "
             "client has not uploaded them): `missing_asset_hashes` lists their SHA-256; upload "
             "each with `asset`, then repeat the `hello`."
+        ),
+    )
+    SOLVE_FAILED = (
+        18,
+        (
+            "The controller could not find a command for this state (no solution within its "
+            "iteration caps or `qp_time_budget_s`, a linear solve failed, or the dynamics "
+            "overflow); nothing was sent that could reach an actuator: hold the robot's safe "
+            "behaviour, the session is kept and the next state is solved afresh."
         ),
     )
 
