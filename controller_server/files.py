@@ -7,12 +7,18 @@ followed, to a regular file inside one of those directories. Anything else is
 refused with one message per name, whatever the reason (missing, outside,
 unreadable, a directory, too long a name), so a client cannot probe the
 server's file system; error messages show only the name the client sent.
+
+Messages from deeper down (MuJoCo's compiler, a file a model names) may
+still hold a server path: :func:`without_server_paths` rewrites the server's
+directories in them, a file in a model directory by its path relative to it.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import stat
+import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,11 +28,13 @@ from controller_server.errors import FileTooLarge, ServerFault
 __all__ = [
     "DEFAULT_MAX_FILE_BYTES",
     "MAX_NAME_LENGTH",
+    "MODEL_DIRECTORY_PLACEHOLDER",
     "ServerFileKind",
     "display_name",
     "max_file_bytes",
     "model_directories",
     "set_model_directories",
+    "without_server_paths",
 ]
 
 DEFAULT_MAX_FILE_BYTES = 4 * 1024 * 1024
@@ -89,6 +97,82 @@ def display_name(name: str) -> str:
     """The name a client sent, quoted and cut to 100 characters, for an error message."""
     shown = name if len(name) <= _DISPLAY_LENGTH else name[:_DISPLAY_LENGTH] + "…"
     return repr(shown)
+
+
+MODEL_DIRECTORY_PLACEHOLDER = "<model dir>"
+"""What a model directory itself is called in a message (a file in it: its relative path)."""
+
+_PACKAGE_ROOT = Path(__file__).resolve().parent.parent
+
+
+def _server_directories() -> dict[str, str]:
+    """Directories whose path a client must not see, each with what it is shown as.
+
+    A model directory followed by a path is removed (the path is relative to it); alone it
+    is :data:`MODEL_DIRECTORY_PLACEHOLDER`. Each is listed as given and resolved.
+    """
+    shown: dict[str, str] = {}
+
+    def add(directory: str | Path | None, placeholder: str) -> None:
+        if not directory:
+            return
+        forms = {str(directory)}
+        try:
+            forms.add(str(Path(directory).resolve()))
+        except (OSError, RuntimeError):
+            pass
+        for form in forms:
+            form = form.rstrip("/")
+            if form and form not in shown:  # "/" (root) is never a server directory
+                shown[form] = placeholder
+
+    for directory in _policy.directories:
+        add(directory, MODEL_DIRECTORY_PLACEHOLDER)
+    add(tempfile.gettempdir(), "<temp dir>")
+    try:
+        add(os.getcwd(), "<working dir>")
+    except OSError:  # the working directory was removed
+        pass
+    add(_PACKAGE_ROOT, "<install dir>")
+    try:
+        add(Path.home(), "~")
+    except (RuntimeError, KeyError):  # no home directory
+        pass
+    return shown
+
+
+def without_server_paths(text: str) -> str:
+    """``text`` with the server's directories rewritten, for a message a client reads.
+
+    A path inside one of the model directories becomes its path relative to that
+    directory (``/srv/models/robot/meshes/foot.stl`` → ``robot/meshes/foot.stl``);
+    the temporary directory, the working directory, Poise's install directory and
+    the home directory become ``<temp dir>``, ``<working dir>``, ``<install dir>``
+    and ``~``. The innermost directory wins (a model directory under ``/tmp`` gives
+    relative paths). A directory is matched only as a whole path component at the
+    start of a path: ``/tmpfiles`` and ``/a/tmp`` are left alone.
+
+    Args:
+        text: A message that may quote server paths (MuJoCo's, the system's).
+
+    Returns:
+        The message as a client may read it.
+    """
+    shown = _server_directories()
+    if not shown:
+        return text
+    alternatives = "|".join(re.escape(d) for d in sorted(shown, key=len, reverse=True))
+    pattern = re.compile(
+        rf"(?<![\w.~-])(?P<directory>{alternatives})(?:(?P<separator>/+)|(?![\w.~-]))"
+    )
+
+    def rewrite(match: re.Match[str]) -> str:
+        placeholder = shown[match["directory"]]
+        if placeholder == MODEL_DIRECTORY_PLACEHOLDER and match["separator"]:
+            return ""
+        return placeholder + ("/" if match["separator"] else "")
+
+    return pattern.sub(rewrite, text)
 
 
 @dataclass(frozen=True)

@@ -414,6 +414,14 @@ def expand_mjcf(text: bytes | str, read: FileReader | None) -> tuple[str, dict[s
             deeper than :data:`MAX_INCLUDE_DEPTH`, a plugin, or a file that
             cannot be read.
     """
+    xml, assets, _ = _expand_mjcf(text, read)
+    return xml, assets
+
+
+def _expand_mjcf(
+    text: bytes | str, read: FileReader | None
+) -> tuple[str, dict[str, bytes], dict[str, str]]:
+    """:func:`expand_mjcf`, and the path each asset key stands for (for MuJoCo's messages)."""
     root = _parse_xml(text, "the model")
     if root.tag != "mujoco":
         raise DescriptionError(f"an MJCF file's root element is <mujoco>, not <{root.tag}>")
@@ -455,7 +463,20 @@ def expand_mjcf(text: bytes | str, read: FileReader | None) -> tuple[str, dict[s
                 assets[keys[path]] = _read(read, path, f"<{element.tag} {attribute}>")
             element.set(attribute, keys[path])
             cost.add_file(path, assets[keys[path]], times)
-    return ET.tostring(root, encoding="unicode"), assets
+    paths = {key: path for path, key in keys.items()}
+    return ET.tostring(root, encoding="unicode"), assets, paths
+
+
+def _mujoco_message(exc: ValueError, paths: dict[str, str]) -> str:
+    """MuJoCo's message on one line, each asset key replaced by the path the model names.
+
+    MuJoCo names a file it cannot decode by its key, a name the client never wrote.
+    """
+    detail = " ".join(str(exc).split())
+    if not paths:
+        return detail
+    keys = "|".join(re.escape(key) for key in sorted(paths, key=len, reverse=True))
+    return re.sub(rf"(?<![\w.])(?:{keys})(?![\w.])", lambda key: paths[key[0]], detail)
 
 
 def _safe_suffix(path: str) -> str:
@@ -696,12 +717,12 @@ def compile_mjcf(
     Raises:
         DescriptionError: :func:`expand_mjcf`'s, or MuJoCo's message on one line.
     """
-    xml, assets = expand_mjcf(text, read)
+    xml, assets, paths = _expand_mjcf(text, read)
     try:
         spec = mujoco.MjSpec.from_string(xml, assets=assets)
         return spec, spec.compile()
     except ValueError as exc:
-        detail = " ".join(str(exc).split())
+        detail = _mujoco_message(exc, paths)
         raise DescriptionError(f"MuJoCo could not compile the model: {detail}") from None
 
 
@@ -1495,7 +1516,7 @@ def _urdf_mesh_points(mesh: ET.Element, read: FileReader | None) -> np.ndarray |
         )
         mj = mujoco.MjSpec.from_string(xml, assets={key: data}).compile()
     except ValueError as exc:
-        detail = " ".join(str(exc).split())
+        detail = _mujoco_message(exc, {key: filename})
         raise DescriptionError(f"MuJoCo cannot load {filename!r}: {detail}") from None
     shape = _shape_points(_GEOM.mjGEOM_MESH, np.zeros(3), _mesh_vertices(mj, 0))
     return None if shape is None else _placed(shape, _se3(mj.geom_pos[0], mj.geom_quat[0]))

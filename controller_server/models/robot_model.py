@@ -29,13 +29,19 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.errors import (
+    FileTooLarge,
     FrameNotFound,
     ModelError,
     ModelNotFound,
     ModelTooLarge,
     ServerFault,
 )
-from controller_server.files import ServerFileKind, display_name, model_directories
+from controller_server.files import (
+    ServerFileKind,
+    display_name,
+    model_directories,
+    without_server_paths,
+)
 from controller_server.models.description import (
     DescriptionError,
     DescriptionLimitError,
@@ -297,14 +303,40 @@ def load_robot_model(
             (XML nesting and elements, bodies, DoF, file bytes, image pixels) or of
             ``protocol.messages`` (contacts and their points).
         FileTooLarge: A file over the size cap.
+
+        Each detail names a file as the client knows it: by the name it sent, by the
+        name the model gives it, or by its path relative to a model directory; no
+        server directory (:func:`~controller_server.files.without_server_paths`).
     """
+    # A name refused here is shown as the client sent it, as every name is (files.py).
+    main_file = MODEL_FILES.read_bytes(model) if model_text is None and model is not None else None
+    try:
+        return _load(model, main_file, model_text, model_format, model_assets, contacts, keyframe)
+    except ServerFault as exc:
+        # The one way out for every error of a model: MuJoCo's and the system's
+        # messages may quote a server directory, which no client may see.
+        exc.detail = without_server_paths(exc.detail)
+        exc.args = (f"{exc.field}: {exc.detail}",)
+        raise
+
+
+def _load(
+    model: str | None,
+    main_file: tuple[Path, bytes] | None,
+    model_text: str | None,
+    model_format: str,
+    model_assets: dict[str, bytes] | None,
+    contacts: list[ContactSpec] | None,
+    keyframe: str | None,
+) -> RobotModel:
+    """:func:`load_robot_model` once a named model's file is read (``main_file``: path, bytes)."""
     if model_text is not None:
         text = model_text.encode()
         name = "client_model"
         files = dict(model_assets or {})
         read = _reader(files)
-    elif model is not None:
-        path, text = MODEL_FILES.read_bytes(model)
+    elif model is not None and main_file is not None:
+        path, text = main_file
         name = model if model in BUILTIN_MODELS else Path(model).stem
         if path.suffix.lower() == ".urdf":
             model_format = "urdf"
@@ -389,9 +421,14 @@ def _server_reader(directory: Path) -> Callable[[str], bytes]:
             ) from None
         try:
             return MODEL_ASSET_FILES.read_bytes(str(path))[1]
-        except ServerFault as exc:
+        except FileTooLarge as exc:
+            raise DescriptionError(exc.detail) from None
+        except ServerFault:
+            # Not the refusal's text: it would quote the resolved, absolute path.
             raise DescriptionError(
-                f"it is not a readable file in the server's model directories ({exc.detail})"
+                f"it is not a readable file in the server's model directories "
+                f"({display_name(name)} names no {' or '.join(MODEL_ASSET_FILES.suffixes)} "
+                "file in them)"
             ) from None
 
     return read
