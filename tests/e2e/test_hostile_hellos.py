@@ -11,12 +11,11 @@ from __future__ import annotations
 import contextlib
 
 import msgpack
-import numpy as np
 import pytest
 
 from clients.server_process import ServerProcess
 from protocol import PROTOCOL_VERSION, ErrorCode
-from protocol.messages import Command, ContactSpec, Error, Hello, SetParams, State, Welcome
+from protocol.messages import Command, ContactSpec, Error, Hello, SetParams, Welcome
 from tests.controller_server.test_hello_limits import (
     FOOT_SIZE_M,
     assert_soles_are_the_sent_mesh,
@@ -24,6 +23,7 @@ from tests.controller_server.test_hello_limits import (
     decoys,
     deep_mjcf,
     sole,
+    standing,
     urdf_with_foot_meshes,
 )
 from tests.e2e.test_server_safety import Peer, worker_pids
@@ -55,20 +55,6 @@ def victim(server):
         reply = peer.ask(standing(welcome, [True, True], seq=2))
         assert isinstance(reply, Command), reply  # not NO_SESSION: its worker lives
     assert worker_pids(server) == workers
-
-
-def standing(welcome: Welcome, flags: list[bool], seq: int) -> State:
-    return State(
-        seq=seq,
-        time_s=0.0,
-        joint_position=welcome.standing_joint_position,
-        joint_velocity=np.zeros(sum(joint.nv for joint in welcome.joints)),
-        position_base_in_world=welcome.standing_position_base_in_world,
-        orientation_base_in_world_xyzw=welcome.standing_orientation_base_in_world_xyzw,
-        linear_velocity_base_in_world=np.zeros(3),
-        angular_velocity_base_in_base=np.zeros(3),
-        contact_flags=flags,
-    )
 
 
 def test_a_hello_far_over_the_point_caps_is_refused_and_one_under_is_served(server, victim):
