@@ -69,12 +69,12 @@ def standing_input(robot, which: str, value: float) -> ControlInput:
 
 
 def check_outcome(robot, controller, control_input) -> str:
-    """A finite command within the torque limits, or a typed INTERNAL error: which one."""
+    """A finite command within the torque limits, or a typed SOLVE_FAILED error: which one."""
     try:
         output = controller.compute(control_input)
     except ServerFault as error:  # anything else (LinAlgError, ValueError) fails the test
         assert isinstance(error, ControllerFailed)
-        assert wire_code(error) == ErrorCode.INTERNAL
+        assert wire_code(error) == ErrorCode.SOLVE_FAILED
         assert error.field == "controller"
         assert "\n" not in error.detail
         return "error"
