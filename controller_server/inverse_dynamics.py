@@ -33,7 +33,7 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, lru_cache
 
 import numpy as np
 import pinocchio as pin
@@ -105,7 +105,7 @@ def friction_pyramid(friction_coefficients: Sequence[float]) -> np.ndarray:
     return _friction_pyramid(tuple(float(mu) for mu in friction_coefficients)).copy()
 
 
-@cache
+@lru_cache(maxsize=256)  # bounded: a client may send new coefficients every tick
 def _friction_pyramid(friction_coefficients: tuple[float, ...]) -> np.ndarray:
     count = len(friction_coefficients)
     rows = np.zeros((5 * count, 3 * count))

@@ -33,7 +33,6 @@ from typing import TYPE_CHECKING
 
 from controller_server.asset_cache import read_asset
 from controller_server.errors import ServerFault, wire_code
-from protocol import fastpath
 from protocol.codec import MAX_MESSAGE_BYTES, decode
 from protocol.errors import AssetsMissing, ErrorCode, ProtocolError
 from protocol.messages import (
@@ -89,23 +88,6 @@ def release_free_memory() -> None:
         gc.freeze()
     if _MALLOC_TRIM is not None:
         _MALLOC_TRIM(0)
-
-
-def _decode(payload: bytes, max_bytes: int) -> Message:
-    """:func:`protocol.codec.decode`, leaving nothing of the request alive after it.
-
-    The codec's fast path raises one :class:`~protocol.fastpath.Fallback` instance for
-    every payload it hands to pydantic, and each raise adds that request's frames to the
-    instance's traceback: the request's bytes, its decoded map and the reply made for it
-    (every mutated state of a fuzz), kept for good. Issue 32's fuzz mix grew a worker from
-    182 to 813 MB that way, and the broker, which answers requests without a session with
-    a table of its own, from 55 to 171 MB. (``protocol.fastpath`` should raise it without
-    its old traceback; until then the table drops it after each request.)
-    """
-    try:
-        return decode(payload, max_bytes)
-    finally:
-        fastpath._FALLBACK.__traceback__ = None
 
 
 class SessionTable:
@@ -165,7 +147,7 @@ class SessionTable:
         seq = -1
         request = None
         try:
-            request = _decode(payload, self.max_message_bytes)
+            request = decode(payload, self.max_message_bytes)
             seq = request.seq
             if isinstance(request, Hello) and request.model_asset_hashes:
                 request = self._with_files_inline(request)

@@ -227,8 +227,10 @@ def decode(data: bytes, max_bytes: int = MAX_MESSAGE_BYTES) -> Message:
     if read is not None:
         try:
             return read(payload)  # type: ignore[return-value]
-        except Fallback:  # pydantic says what is wrong, or converts what it may
-            pass
+        except Fallback as fallback:  # pydantic says what is wrong, or converts what it may
+            # One shared instance: each raise would add this request's frames (its bytes,
+            # map and reply) to its traceback, for good (issue 32, finding 6).
+            fallback.__traceback__ = None
     try:
         return cls.model_validate(payload)
     except ValidationError as exc:

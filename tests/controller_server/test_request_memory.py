@@ -18,7 +18,7 @@ from tests.e2e.test_fuzz_server import _mutate
 
 def frames_of_requests() -> int:
     """Frames of the table's request handling still alive (held by some traceback)."""
-    names = {"_answer", "handle", "decode", "_decode"}
+    names = {"_answer", "handle", "decode"}
     return sum(
         isinstance(o, types.FrameType) and o.f_code.co_name in names for o in gc.get_objects()
     )
