@@ -39,7 +39,7 @@ from protocol.messages import (
     State,
     Welcome,
 )
-from tests.e2e.test_fuzz_server import _mutate
+from tests.e2e.test_fuzz_server import _mutate, _peek_seq
 from tests.helpers import examples, random_state
 
 pytestmark = pytest.mark.e2e
@@ -234,17 +234,6 @@ class MixClient:
 
 
 # ------------------------------------------------------------------ the run
-
-
-def _peek_seq(data: bytes) -> int | None:
-    try:
-        payload = msgpack.unpackb(data)
-    except Exception:
-        return None
-    seq = payload.get("seq") if isinstance(payload, dict) else None
-    if type(seq) is not int or not 0 <= seq < 2**63:  # `true` and `1.0` are not seq 1
-        return None  # and one out of range cannot be echoed: the error says -1
-    return seq
 
 
 @dataclasses.dataclass

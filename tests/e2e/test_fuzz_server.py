@@ -247,4 +247,6 @@ def _peek_seq(data: bytes) -> int | None:
     except Exception:
         return None
     seq = payload.get("seq") if isinstance(payload, dict) else None
-    return seq if type(seq) is int else None  # `true` and `1.0` are not seq 1
+    if type(seq) is not int or not 0 <= seq < 2**63:  # `true` and `1.0` are not seq 1
+        return None  # and one out of range cannot be echoed: the error says -1
+    return seq

@@ -134,14 +134,19 @@ def test_a_flooding_client_delays_another_by_one_request_not_by_its_queue():
     A worker serves its requests one client at a time in turn. The worker is
     stopped while a client with two sessions queues four requests and another
     client one; resumed, it serves the second client's request second, not
-    fifth (in arrival order, as before, it was last).
+    fifth (in arrival order, as before, it was last). The peers share one ZeroMQ
+    context: replies sent a tick apart could otherwise swap places in two I/O
+    threads on a busy machine (and two replies ready at once count the other
+    client's first).
     """
     with (
         ServerProcess(extra_args=["--workers", "1", "--deadline", "10"]) as server,
         contextlib.ExitStack() as stack,
     ):
-        flood = [stack.enter_context(Peer(server.endpoint)) for _ in range(2)]
-        other = stack.enter_context(Peer(server.endpoint, source="127.0.0.2"))
+        context = zmq.Context()
+        stack.callback(context.term)  # after the peers' sockets are closed
+        flood = [stack.enter_context(Peer(server.endpoint, context=context)) for _ in range(2)]
+        other = stack.enter_context(Peer(server.endpoint, source="127.0.0.2", context=context))
         hello = Hello(model="thesis_humanoid", controller="prioritized")
         welcomes = [peer.ask(hello) for peer in flood]
         welcome = other.ask(Hello(model="thesis_humanoid", controller="tracking"))

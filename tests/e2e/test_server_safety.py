@@ -31,8 +31,9 @@ REPLY_TIMEOUT_MS = 10_000
 class Peer:
     """A raw DEALER: chosen routing id, source address and CURVE keys."""
 
-    def __init__(self, endpoint, routing_id=None, source=None, curve=None):
-        self.context = zmq.Context()
+    def __init__(self, endpoint, routing_id=None, source=None, curve=None, context=None):
+        self.own_context = context is None  # a shared one: its I/O thread orders all replies
+        self.context = zmq.Context() if context is None else context
         self.socket = self.context.socket(zmq.DEALER)
         self.socket.setsockopt(zmq.LINGER, 0)
         if routing_id is not None:
@@ -52,7 +53,8 @@ class Peer:
 
     def close(self):
         self.socket.close(linger=0)
-        self.context.term()
+        if self.own_context:
+            self.context.term()
 
     def __enter__(self):
         return self
