@@ -9,11 +9,15 @@ One run prints:
 2. 8 clients paced at 1 kHz each for 10 s: ticks answered, p50/p99 round trip;
 3. a `tracking` client at 200 Hz beside a `prioritized` client at full rate
    (goal: the tracking client gets ≥ 95 % of its ticks within 5 ms);
-4. the same beside one client's four `prioritized` sessions at full rate (the
-   tracking client from another address, 127.0.0.2: the server shares its
-   workers between clients, not sessions; same goal).
+4. the same beside one client's four `prioritized` sessions at full rate
+   (same goal).
 
-Usage: python bench/load.py [--seconds 10]
+Parts 1 and 2 let one client use every worker (`--max-workers-per-client`):
+their clients all come from this host, which the server counts as one
+client. In parts 3 and 4 the tracking client comes from another address,
+127.0.0.2: the server shares its workers between clients, not sessions.
+
+Usage: python bench/load.py [--seconds 10] [--parts 1 2 3 4]
 """
 
 from __future__ import annotations
@@ -62,10 +66,20 @@ def log(text: str) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="length of each part")
+    parser.add_argument(
+        "--parts", type=int, nargs="+", choices=(1, 2, 3, 4), default=[1, 2, 3, 4],
+        metavar="N", help="which parts to run (default: 1 2 3 4)",
+    )  # fmt: skip
     args = parser.parse_args()
-    seconds = args.seconds
-    hello = Hello(model="thesis_humanoid", controller="momentum")
+    parts = (throughput, paced, tracking_beside_one, tracking_beside_four)
+    for number, part in enumerate(parts, start=1):
+        if number in args.parts:
+            part(args.seconds)
 
+
+def throughput(seconds: float) -> None:
+    """Part 1."""
+    hello = Hello(model="thesis_humanoid", controller="momentum")
     print(f"1. four clients at full rate, {seconds:g} s each")
     rates, cpu = {}, {}
     for controller in ("momentum", "prioritized"):
@@ -74,7 +88,9 @@ def main() -> None:
             for i in range(4)
         ]
         for workers in (1, 2):
-            with ServerProcess(extra_args=["--workers", str(workers)]) as server:
+            # One host is one client: it may use every worker here (throughput).
+            all_workers = ["--workers", str(workers), "--max-workers-per-client", str(workers)]
+            with ServerProcess(extra_args=all_workers) as server:
                 before, client_before = server_cpu_seconds(server), time.process_time()
                 loads = run_clients(server.endpoint, clients, seconds, progress=log)
                 after, client_after = server_cpu_seconds(server), time.process_time()
@@ -114,8 +130,12 @@ def main() -> None:
         ratio = rates[controller, 2] / rates[controller, 1]
         print(f"{controller}: 2 workers / 1 worker = {ratio:.2f}x (goal ≥ 1.7x)")
 
+
+def paced(seconds: float) -> None:
+    """Part 2."""
+    hello = Hello(model="thesis_humanoid", controller="momentum")
     print(f"\n2. eight clients paced at 1 kHz, `momentum`, {seconds:g} s, 2 workers")
-    with ServerProcess(extra_args=["--workers", "2"]) as server:
+    with ServerProcess(extra_args=["--workers", "2", "--max-workers-per-client", "2"]) as server:
         paced = run_clients(
             server.endpoint, [(f"client {i}", hello, 1000.0) for i in range(8)], seconds,
             progress=log,
@@ -129,7 +149,13 @@ def main() -> None:
         )
     print(f"all: {rate(paced, seconds):.0f} replies/s")
 
-    print(f"\n3. `tracking` at 200 Hz beside `prioritized` at full rate, {seconds:g} s, 2 workers")
+
+def tracking_beside_one(seconds: float) -> None:
+    """Part 3."""
+    print(
+        f"\n3. `tracking` at 200 Hz (from 127.0.0.2) beside `prioritized` at full rate, "
+        f"{seconds:g} s, 2 workers"
+    )
     with ServerProcess(extra_args=["--workers", "2"]) as server:
         tracking, prioritized = run_clients(
             server.endpoint,
@@ -139,9 +165,13 @@ def main() -> None:
             ],
             seconds,
             progress=log,
+            sources={"tracking": "127.0.0.2"},
         )
     print_fairness(tracking, [prioritized], seconds)
 
+
+def tracking_beside_four(seconds: float) -> None:
+    """Part 4."""
     print(
         f"\n4. `tracking` at 200 Hz (from 127.0.0.2) beside one client's four `prioritized` "
         f"sessions at full rate, {seconds:g} s, 2 workers"

@@ -229,10 +229,15 @@ class RunPool:
 def batch_server(workers: int) -> ServerProcess:
     """A loopback ``poise serve`` (not started) for ``workers`` clients at once.
 
-    One session worker per client, and a deadline of :data:`BATCH_DEADLINE_S`.
+    One session worker per client (all on this host, so one client to the server:
+    it may occupy every worker), and a deadline of :data:`BATCH_DEADLINE_S`.
     """
+    workers = max(1, workers)
     return ServerProcess(
-        extra_args=["--workers", str(max(1, workers)), "--deadline", f"{BATCH_DEADLINE_S:g}"]
+        extra_args=[
+            *("--workers", str(workers), "--max-workers-per-client", str(workers)),
+            *("--deadline", f"{BATCH_DEADLINE_S:g}"),
+        ]
     )
 
 

@@ -41,6 +41,9 @@ class ServeConfig:
         max_sessions: Sessions on the server.
         max_sessions_per_client: Sessions per client: per CURVE key, or per
             peer address without CURVE.
+        max_workers_per_client: Workers one client's sessions may occupy (``None``:
+            all but one, at least one), so a client arriving later finds a worker
+            no other client floods: a client's sessions share the client's share.
         max_in_flight: Requests of one session not yet answered; more are refused
             (a flooding client). A request answered ``DEADLINE_EXCEEDED`` no
             longer counts: its worker skips it if it has not started it.
@@ -76,6 +79,7 @@ class ServeConfig:
     recycle_after_s: float = 5.0
     max_sessions: int = 128
     max_sessions_per_client: int = 32
+    max_workers_per_client: int | None = None
     max_in_flight: int = 2
     max_message_bytes: int = MAX_MESSAGE_BYTES
     stalled_message_timeout_s: float = 30.0
@@ -107,6 +111,8 @@ class ServeConfig:
             "max_upload_bytes_per_client": self.max_upload_bytes_per_client,
             "model_cache_entries": self.model_cache_entries,
         }
+        if self.max_workers_per_client is not None:
+            positive["max_workers_per_client"] = self.max_workers_per_client
         for name, value in positive.items():
             if not value > 0 or value != value or value == float("inf"):
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
@@ -117,6 +123,13 @@ class ServeConfig:
             )
         if not self.endpoints:
             raise ValueError("give at least one endpoint to bind")
+
+    @property
+    def workers_per_client(self) -> int:
+        """How many workers one client's sessions may occupy (see ``max_workers_per_client``)."""
+        if self.max_workers_per_client is None:
+            return max(1, self.workers - 1)
+        return min(self.workers, self.max_workers_per_client)
 
     @property
     def heartbeat_interval_s(self) -> float:

@@ -441,10 +441,7 @@ class ControllerServer:
             if not self.workers:  # stopping: a recycled worker is not replaced
                 self._reply(identity, _error(seq, ErrorCode.LIMIT_EXCEEDED, "", "stopping"))
                 return
-            # Ready workers first; a replacement still warming up gets it queued.
-            worker = min(
-                self.workers.values(), key=lambda w: (not w.ready, len(w.routes), len(w.pending))
-            )
+            worker = self._place(client)
             old = self.routes.pop(identity, None)
             if old is not None:  # a different peer's session on this routing id
                 self._drop_route(identity, old)
@@ -452,6 +449,37 @@ class ControllerServer:
             self.routes[identity] = route
             worker.routes.add(identity)
         self._forward(identity, route, seq, payload, self.config.hello_deadline_s)
+
+    def _place(self, client: str) -> _Worker:
+        """The worker for a new session of ``client``.
+
+        A client's sessions occupy at most ``workers_per_client`` workers (all but
+        one by default): a client that opens a session per worker and floods them
+        would otherwise leave a client arriving later only workers where it waits
+        behind a tick of the flood's (non-preemptive), whereas on a worker of its own
+        the operating system shares the cores between the processes. Within that,
+        the worker with the fewest other clients' sessions, then the fewest
+        sessions; ready workers first (a replacement still warming up gets the
+        request queued).
+        """
+        others: dict[bytes, int] = {}
+        held = set()
+        for worker in self.workers.values():
+            clients = [
+                route.client for identity in worker.routes if (route := self.routes.get(identity))
+            ]
+            others[worker.identity] = sum(c != client for c in clients)
+            if client in clients:
+                held.add(worker.identity)
+        candidates = [
+            worker
+            for worker in self.workers.values()
+            if len(held) < self.config.workers_per_client or worker.identity in held
+        ]
+        return min(
+            candidates,
+            key=lambda w: (not w.ready, others[w.identity], len(w.routes), len(w.pending)),
+        )
 
     def _receive_asset(self, identity: bytes, client: str, payload: bytes) -> Message:
         """The answer to an ``asset`` request: the cache's, or an error."""

@@ -31,6 +31,7 @@ def serve_config(args: argparse.Namespace) -> ServeConfig:
         recycle_after_s=args.recycle_after,
         max_sessions=args.max_sessions,
         max_sessions_per_client=args.max_sessions_per_client,
+        max_workers_per_client=args.max_workers_per_client,
         max_in_flight=args.max_in_flight,
         max_message_bytes=args.max_message_bytes,
         stalled_message_timeout_s=args.stalled_message_timeout,
@@ -188,6 +189,14 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:  # type: ignore[t
         default=32,
         metavar="N",
         help="sessions per client: per CURVE key, or per peer address (default: 32)",
+    )
+    serve.add_argument(
+        "--max-workers-per-client",
+        type=int,
+        default=None,
+        metavar="N",
+        help="workers one client's sessions may occupy, so a client arriving later finds one "
+        "no other client floods (default: all but one)",
     )
     serve.add_argument(
         "--max-in-flight",

@@ -176,3 +176,57 @@ def test_a_flooding_client_delays_another_by_one_request_not_by_its_queue():
                     assert isinstance(decode(peer.socket.recv()), Command)
                     flood_replies += 1
     assert flood_replies_before <= 1, f"served after {flood_replies_before} flood requests"
+
+
+CONTROLLER_OF = {"track": "tracking", "flood": "prioritized"}
+FLOOD = {"flood 0", "flood 1", "flood 2", "flood 3"}
+
+
+@pytest.mark.parametrize(
+    ("tracking_first", "workers_per_client", "expected"),
+    [
+        (False, [], [{"tracking"}, FLOOD]),
+        pytest.param(True, [], [{"tracking"}, FLOOD], marks=pytest.mark.slow),
+        # Allowed every worker, the flood spreads, and the tracking client shares one.
+        pytest.param(
+            False,
+            ["--max-workers-per-client", "2"],
+            [{"flood 0", "flood 2", "tracking"}, {"flood 1", "flood 3"}],
+            marks=pytest.mark.slow,
+        ),
+    ],
+)
+def test_a_client_with_a_session_per_worker_leaves_a_worker_to_the_others(
+    tracking_first, workers_per_client, expected
+):
+    """Issue 32, finding 3: one client's sessions on every worker starved the others.
+
+    A client's sessions occupy at most all workers but one (``--max-workers-per-client``),
+    so a client arriving before or after a flood of four sessions has a worker of its
+    own, where the operating system, not a queue, shares the cores (bench/load.py part
+    4 measures the round trips). Which sessions share a worker is seen by stopping
+    each worker in turn: the sessions that go unanswered live there.
+    """
+    args = ["--workers", "2", "--deadline", "30", *workers_per_client]
+    with ServerProcess(extra_args=args) as server, contextlib.ExitStack() as stack:
+        flood = {f"flood {i}": stack.enter_context(Peer(server.endpoint)) for i in range(4)}
+        tracking = {"tracking": stack.enter_context(Peer(server.endpoint, source="127.0.0.2"))}
+        peers = {**tracking, **flood} if tracking_first else {**flood, **tracking}
+        welcomes = {
+            name: peer.ask(Hello(model="thesis_humanoid", controller=CONTROLLER_OF[name[:5]]))
+            for name, peer in peers.items()
+        }
+        stopped_together = []
+        for seq, worker in enumerate(worker_pids(server), start=2):
+            os.kill(worker, signal.SIGSTOP)
+            try:
+                for name, peer in peers.items():
+                    peer.socket.send(encode(standing(welcomes[name], seq=seq)))
+                time.sleep(3.0)  # the running worker answers its sessions within it
+                answered = {name for name, peer in peers.items() if peer.socket.poll(0)}
+            finally:
+                resume([worker])
+            stopped_together.append(set(peers) - answered)
+            for peer in peers.values():  # the stopped worker's replies, once resumed
+                assert isinstance(decode(peer.socket.recv()), Command)
+    assert sorted(stopped_together, key=sorted) == sorted(expected, key=sorted)
