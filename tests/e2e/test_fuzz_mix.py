@@ -256,14 +256,19 @@ class Tally:
                 self.labels[label] = self.labels.get(label, 0) + count
 
 
-def _run_client(endpoint: str, seed: int, messages: int, tally: Tally) -> None:
-    """Send ``messages`` requests one at a time, each answered once before the next."""
+def _run_client(endpoint: str, index: int, seed: int, messages: int, tally: Tally) -> None:
+    """Send ``messages`` requests one at a time, each answered once before the next.
+
+    Clients come from addresses of their own (127.0.0.2, .3, …: each one client to the
+    server, which shares its workers between clients), the last two from one address.
+    """
     client = MixClient(np.random.default_rng(seed))
     labels: dict[str, int] = {}
     context = zmq.Context()
     socket = context.socket(zmq.DEALER)
     socket.setsockopt(zmq.LINGER, 0)
-    socket.connect(endpoint)
+    source = f"127.0.0.{2 + min(index, CLIENTS - 2)}"
+    socket.connect(endpoint.replace("tcp://", f"tcp://{source}:0;", 1))
     try:
         for _ in range(messages):
             data, _kind = client.next_request()
@@ -315,7 +320,7 @@ def run_mix(endpoint: str, messages: int, clients: int, seed: int) -> Tally:
     threads = [
         threading.Thread(
             target=_run_client,
-            args=(endpoint, seed * 1000 + i, messages // clients, tally),
+            args=(endpoint, i, seed * 1000 + i, messages // clients, tally),
             daemon=True,
         )
         for i in range(clients)
