@@ -3,7 +3,8 @@
 The zguide's load-balancing broker, adapted to sessions that keep state: a
 ROUTER faces the clients, and each worker process
 (:mod:`controller_server.worker`) is reached over a Unix socket pair of its
-own. A ``hello`` opens the client's session on the worker with the fewest;
+own. A ``hello`` opens the client's session on a worker chosen by
+:meth:`ControllerServer._place` (a client keeps to its share of the workers);
 every later request of that session goes to the same worker. So serving uses
 every core, and a slow session delays only the sessions of its own worker.
 The broker polls the client socket and every worker's socket in one
