@@ -136,18 +136,18 @@ def paced(seconds: float) -> None:
     hello = Hello(model="thesis_humanoid", controller="momentum")
     print(f"\n2. eight clients paced at 1 kHz, `momentum`, {seconds:g} s, 2 workers")
     with ServerProcess(extra_args=["--workers", "2", "--max-workers-per-client", "2"]) as server:
-        paced = run_clients(
+        loads = run_clients(
             server.endpoint, [(f"client {i}", hello, 1000.0) for i in range(8)], seconds,
             progress=log,
         )  # fmt: skip
     print(f"{'client':<12}{'ticks':>8}{'answered':>10}{'rate Hz':>9}{'p50 ms':>9}{'p99 ms':>9}"
           f"  errors")  # fmt: skip
-    for load in paced:
+    for load in loads:
         print(
             f"{load.label:<12}{load.ticks:>8}{load.commands:>10}{load.commands / seconds:>9.0f}"
             f"{load.percentile_ms(50):>9.2f}{load.percentile_ms(99):>9.2f}  {load.errors or ''}"
         )
-    print(f"all: {rate(paced, seconds):.0f} replies/s")
+    print(f"all: {rate(loads, seconds):.0f} replies/s")
 
 
 def tracking_beside_one(seconds: float) -> None:

@@ -22,7 +22,7 @@ from protocol.codec import decode, encode
 from protocol.errors import ErrorCode
 from protocol.messages import Bye, Hello, Welcome
 
-__all__ = ["ClientLoad", "run_clients", "standing_request"]
+__all__ = ["ClientLoad", "from_source", "run_clients", "standing_request"]
 
 REPLY_TIMEOUT_S = 5.0
 """A reply later than this ends the client's run (``errors["timeout"]``)."""
@@ -58,6 +58,15 @@ def standing_request(welcome: Welcome) -> bytes:
     return encode(state)
 
 
+def from_source(endpoint: str, source: str) -> str:
+    """``endpoint``, connected to from the local address ``source``.
+
+    Another client to a server that tells clients apart by address: libzmq's
+    ``tcp://SOURCE:0;HOST:PORT``.
+    """
+    return endpoint.replace("tcp://", f"tcp://{source}:0;", 1)
+
+
 def _client(
     endpoint: str,
     hello: Hello | None,
@@ -71,9 +80,7 @@ def _client(
     context = zmq.Context()
     socket = context.socket(zmq.DEALER)
     socket.setsockopt(zmq.LINGER, 0)
-    if source is not None:  # libzmq's "tcp://SOURCE:0;HOST:PORT": another client address
-        endpoint = endpoint.replace("tcp://", f"tcp://{source}:0;", 1)
-    socket.connect(endpoint)
+    socket.connect(endpoint if source is None else from_source(endpoint, source))
     try:
         if hello is not None:
             socket.send(encode(hello))

@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 import zmq
 
+from clients.load import from_source
 from clients.server_process import ServerProcess
 from controller_server.controllers import CONTROLLERS
 from controller_server.models import BUILTIN_MODELS
@@ -268,7 +269,7 @@ def _run_client(endpoint: str, index: int, seed: int, messages: int, tally: Tall
     socket = context.socket(zmq.DEALER)
     socket.setsockopt(zmq.LINGER, 0)
     source = f"127.0.0.{2 + min(index, CLIENTS - 2)}"
-    socket.connect(endpoint.replace("tcp://", f"tcp://{source}:0;", 1))
+    socket.connect(from_source(endpoint, source))
     try:
         for _ in range(messages):
             data, _kind = client.next_request()

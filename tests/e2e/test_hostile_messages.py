@@ -178,8 +178,8 @@ def test_a_flooding_client_delays_another_by_one_request_not_by_its_queue():
     assert flood_replies_before <= 1, f"served after {flood_replies_before} flood requests"
 
 
-CONTROLLER_OF = {"track": "tracking", "flood": "prioritized"}
 FLOOD = {"flood 0", "flood 1", "flood 2", "flood 3"}
+CONTROLLER_OF = {"tracking": "tracking", **dict.fromkeys(FLOOD, "prioritized")}
 
 
 @pytest.mark.parametrize(
@@ -213,7 +213,7 @@ def test_a_client_with_a_session_per_worker_leaves_a_worker_to_the_others(
         tracking = {"tracking": stack.enter_context(Peer(server.endpoint, source="127.0.0.2"))}
         peers = {**tracking, **flood} if tracking_first else {**flood, **tracking}
         welcomes = {
-            name: peer.ask(Hello(model="thesis_humanoid", controller=CONTROLLER_OF[name[:5]]))
+            name: peer.ask(Hello(model="thesis_humanoid", controller=CONTROLLER_OF[name]))
             for name, peer in peers.items()
         }
         stopped_together = []

@@ -18,6 +18,7 @@ import pytest
 import zmq
 
 from clients import ControllerClient, CurveKeys
+from clients.load import from_source
 from clients.server_process import ServerProcess
 from protocol import PROTOCOL_VERSION, ErrorCode, decode, encode
 from protocol.messages import Command, Error, Hello, SetParams, State, Stats, Welcome
@@ -42,8 +43,8 @@ class Peer:
             self.socket.curve_serverkey = curve.server_public
             self.socket.curve_publickey = curve.client_public
             self.socket.curve_secretkey = curve.client_secret
-        if source is not None:  # libzmq's "tcp://source:0;host:port"
-            endpoint = endpoint.replace("tcp://", f"tcp://{source}:0;", 1)
+        if source is not None:
+            endpoint = from_source(endpoint, source)
         self.socket.connect(endpoint)
 
     def ask(self, message, timeout_ms=REPLY_TIMEOUT_MS):
