@@ -332,7 +332,10 @@ def test_damiao_motors_sharing_a_master_id(channel):
     motors[2].sense(-1.0, 0.0)
     devices = [EmulatedDamiao(i, m, J4310, master_id=0) for i, m in motors.items()]
     config = {i: DamiaoMotor(J4310, master_id=0) for i in motors}
-    with serving(channel, devices), DamiaoBus(virtual(channel), config) as bus:
+    with (
+        serving(channel, devices),
+        DamiaoBus(virtual(channel), config, reply_timeout_s=TIMEOUT_S) as bus,
+    ):
         feedback = bus.exchange(dict.fromkeys(motors, ZERO_COMMAND))
     assert feedback[1].position_rad == pytest.approx(1.0, abs=1e-3)
     assert feedback[2].position_rad == pytest.approx(-1.0, abs=1e-3)
