@@ -33,6 +33,7 @@ from protocol.errors import PoiseError
 
 PROTOCOLS = ["mit", "damiao", "odrive", "dynamixel"]
 IDS = (1, 2)
+REPLY_TIMEOUT_S = 0.05  # generous for a busy machine; an exchange ends when all have answered
 _channels = itertools.count()
 
 
@@ -56,7 +57,9 @@ def rig(protocol: str) -> Iterator[Rig]:
             emulator = stack.enter_context(
                 DynamixelEmulator(dict.fromkeys(IDS, model.name), motors)
             )
-            bus = DynamixelBus(emulator.port, dict.fromkeys(IDS, model.name), reply_timeout_s=0.05)
+            bus = DynamixelBus(
+                emulator.port, dict.fromkeys(IDS, model.name), reply_timeout_s=REPLY_TIMEOUT_S
+            )
             stack.callback(bus.close)
             # One current unit in torque, on the steepest segment of the torque map.
             slope = max(
@@ -84,13 +87,13 @@ def rig(protocol: str) -> Iterator[Rig]:
         stack.enter_context(CanDeviceHost(host_bus, devices))
         driver = can.Bus(interface="virtual", channel=channel)
         if protocol == "odrive":
-            bus = ODriveBus(driver, IDS, reply_timeout_s=0.02)
+            bus = ODriveBus(driver, IDS, reply_timeout_s=REPLY_TIMEOUT_S)
             step_Nm, position_step = 1e-5, 1e-6
         elif protocol == "mit":
-            bus = MitBus(driver, dict.fromkeys(IDS, ranges), reply_timeout_s=0.02)
+            bus = MitBus(driver, dict.fromkeys(IDS, ranges), reply_timeout_s=REPLY_TIMEOUT_S)
         else:
             motors_on_bus = {i: DamiaoMotor(ranges, 0x10 + i) for i in IDS}
-            bus = DamiaoBus(driver, motors_on_bus, reply_timeout_s=0.02)
+            bus = DamiaoBus(driver, motors_on_bus, reply_timeout_s=REPLY_TIMEOUT_S)
         if protocol != "odrive":
             step_Nm = 2 * ranges.torque_max_Nm / 4095
             position_step = 2 * ranges.position_max_rad / 65535
