@@ -26,8 +26,9 @@ import time
 
 import numpy as np
 
+from clients.physics.status import standing_state
 from clients.server_process import ServerProcess
-from clients.sim.runner import make_backend, run_scenario, standing_state
+from clients.sim.runner import make_backend, run_scenario
 from clients.sim.scenario import Scenario, load_scenario
 
 

@@ -25,7 +25,7 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from clients.sim.scenario import PushSpec
+from clients.physics.backend import PushSpec
 from clients.state import RobotState
 from protocol.messages import BaseEstimateDiagnostics, Command, Hello, State, Welcome
 

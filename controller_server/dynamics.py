@@ -29,9 +29,9 @@ from functools import cache
 import numpy as np
 import pinocchio as pin
 
+from controller_server.math.spatial import wrench_map
 from controller_server.models import RobotModel
 from controller_server.momentum import MomentumRates, compute_momentum_rates
-from controller_server.spatial import wrench_map
 
 __all__ = [
     "CentroidalMotion",

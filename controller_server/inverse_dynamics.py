@@ -41,9 +41,9 @@ import qpsolvers
 from scipy.linalg import lapack
 
 from controller_server.dynamics import ContactGeometry, DynamicsTerms
+from controller_server.math.spatial import wrench_map
 from controller_server.models import RobotModel
 from controller_server.solvers.qp import solve_qp_bounded
-from controller_server.spatial import wrench_map
 
 __all__ = [
     "InverseDynamicsResult",

@@ -17,8 +17,8 @@ import pinocchio as pin
 
 from controller_server.controllers import ControlInput, ControlOutput
 from controller_server.estimation import BaseEstimate
+from controller_server.math.spatial import cross
 from controller_server.models import RobotModel
-from controller_server.spatial import cross
 from protocol.errors import ErrorCode, ProtocolError
 from protocol.fastpath import construct
 from protocol.messages import (

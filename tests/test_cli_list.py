@@ -6,7 +6,7 @@ import sys
 import mujoco
 import pytest
 
-from clients.sim.model_file import resolve_model_path
+from clients.physics.model_file import resolve_model_path
 from clients.sim.scenario import SCENARIO_DIR
 from controller_server.cli import main
 from controller_server.controllers import CONTROLLERS

@@ -60,7 +60,8 @@ def test_cli_help_runs_and_is_in_the_cli_doc(command):
 
 
 def test_scenarios_doc_documents_every_scenario_key_and_builtin_scenario():
-    from clients.sim.scenario import SCENARIO_DIR, ParamChange, PushSpec, Scenario
+    from clients.physics.backend import PushSpec
+    from clients.sim.scenario import SCENARIO_DIR, ParamChange, Scenario
 
     doc = (DOCS / "scenarios.md").read_text()
     keys = doc.split("\n## Scenario files\n", 1)[1].split("\n## ", 1)[0]

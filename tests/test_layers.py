@@ -1,9 +1,13 @@
-"""Layers point one way (docs/architecture.md): every import of every module, checked."""
+"""Layers point one way (docs/architecture.md): every import of every module, checked.
+
+Two rules. Between the top-level packages: ``protocol`` imports neither of the others, the
+server and the clients do not import each other (the composition root and the shared reading
+of robot files excepted). Inside a package: its sub-packages and top-level modules ("units")
+stand in an ordered list of layers, and a unit imports only units of layers below its own.
+"""
 
 import ast
 from pathlib import Path
-
-import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("protocol", "controller_server", "clients")
@@ -19,11 +23,45 @@ FORBIDDEN = {
     "clients": {"controller_server"},
 }
 
+LAYERS: dict[str, list[tuple[str, ...]]] = {
+    "controller_server": [
+        ("errors", "blas", "params", "math"),  # math: spatial algebra, damped least squares
+        ("files",),  # which files the server may read
+        ("models",),  # robot
+        ("momentum", "balance_points"),  # centroidal momentum rates, COP and CMP
+        ("dynamics",),  # one state's M, h, Jacobians, drifts
+        ("constraints",),
+        ("features",),  # tasks: each objective's rows over q̈
+        ("solvers",),  # KKT of App. D, Algorithm 1, QPs
+        ("inverse_dynamics", "estimation"),
+        ("behaviors",),  # walk, jump: references for the controllers
+        ("controllers",),
+        ("wire", "config", "memory", "asset_cache"),  # serving …
+        ("session",),
+        ("session_table",),
+        ("worker",),
+        ("server",),  # … the broker
+        ("cli",),  # the composition root
+    ],
+    "clients": [
+        ("layout", "progress", "explain", "server_process"),  # the client library …
+        ("state", "client"),
+        ("sampling", "load", "pool"),  # … where runs execute
+        ("physics",),  # the simulated robot: backends, model files, IMU
+        ("track",),  # a run tick by tick
+        ("replay",),
+        ("visual",),
+        ("sim", "bridge"),
+        ("demo", "log_info"),  # commands
+    ],
+}
+"""Per package, its layers from the bottom up: a unit imports only units of layers below."""
 
-def imported_modules(path: Path) -> set[str]:
+
+def imported_modules(source: str, filename: str = "<source>") -> set[str]:
     """Modules a module imports, at module level or inside functions (dotted names)."""
     names = set()
-    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+    for node in ast.walk(ast.parse(source, filename=filename)):
         if isinstance(node, ast.Import):
             names |= {alias.name for alias in node.names}
         elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
@@ -31,9 +69,37 @@ def imported_modules(path: Path) -> set[str]:
     return names
 
 
-def imported_packages(path: Path) -> set[str]:
-    """Top-level packages a module imports, the shared reading of robot files left out."""
-    return {name.split(".")[0] for name in imported_modules(path) if name != SHARED}
+def unit_of(dotted: str) -> str:
+    """``controller_server.features.setpoint`` → ``features``; a package's ``__init__``: ``""``."""
+    parts = dotted.split(".")
+    return parts[1] if len(parts) > 1 and parts[1] != "__init__" else ""
+
+
+def layer_of(package: str, unit: str) -> int:
+    return next(i for i, layer in enumerate(LAYERS[package]) if unit in layer)
+
+
+def upward_imports(module: str, source: str) -> list[str]:
+    """The imports of ``module`` (a path under the root) that break either rule."""
+    package = module.split("/")[0]
+    dotted = module.removesuffix(".py").replace("/", ".")
+    imported = imported_modules(source, module)
+    broken = []
+    forbidden = set() if module.startswith(COMPOSITION_ROOT) else FORBIDDEN[package]
+    broken += sorted(
+        name for name in imported if name != SHARED and name.split(".")[0] in forbidden
+    )
+    if package not in LAYERS or not unit_of(dotted):  # a package's __init__: its facade
+        return broken
+    own = unit_of(dotted)
+    broken += sorted(
+        name
+        for name in imported
+        if name.split(".")[0] == package
+        and unit_of(name) not in ("", own)
+        and layer_of(package, unit_of(name)) >= layer_of(package, own)
+    )
+    return broken
 
 
 MODULES = sorted(
@@ -43,22 +109,54 @@ MODULES = sorted(
 )
 
 
-@pytest.mark.parametrize("module", MODULES)
-def test_no_module_imports_a_layer_it_must_not(module):
-    package = module.split("/")[0]
-    forbidden = set() if module.startswith(COMPOSITION_ROOT) else FORBIDDEN[package]
-    assert not imported_packages(ROOT / module) & forbidden, (
-        f"{module} imports {sorted(imported_packages(ROOT / module) & forbidden)}"
-    )
+def test_no_module_imports_a_layer_it_must_not():
+    offenders = {
+        module: broken
+        for module in MODULES
+        if (broken := upward_imports(module, (ROOT / module).read_text()))
+    }
+    assert not offenders, "\n".join(f"{m} imports {b}" for m, b in offenders.items())
+
+
+def test_every_unit_has_a_layer():
+    for package, layers in LAYERS.items():
+        units = {
+            path.stem if path.is_file() else path.name
+            for path in (ROOT / package).iterdir()
+            if (path.suffix == ".py" and path.stem != "__init__")
+            or (path / "__init__.py").is_file()
+        }
+        placed = [unit for layer in layers for unit in layer]
+        assert len(placed) == len(set(placed)), f"{package}: a unit in two layers"
+        assert units == set(placed), (package, units ^ set(placed))
+
+
+def test_a_planted_upward_import_is_found():
+    setpoint = "controller_server/features/setpoint.py"
+    source = (ROOT / setpoint).read_text()
+    assert upward_imports(setpoint, source) == []
+    planted = source + "\nfrom controller_server.controllers.base import ParamSpec\n"
+    assert upward_imports(setpoint, planted) == ["controller_server.controllers.base"]
+    # sideways: the simulator and the bridge stand side by side, neither imports the other
+    plant = "clients/bridge/plant.py"
+    planted = (ROOT / plant).read_text() + "\ndef f():\n    from clients.sim import runner\n"
+    assert upward_imports(plant, planted) == ["clients.sim"]
+    # across packages
+    track = "clients/track.py"
+    planted = (ROOT / track).read_text() + "\nimport controller_server.server\n"
+    assert upward_imports(track, planted) == ["controller_server.server"]
 
 
 def test_the_shared_reading_of_robot_files_imports_no_other_layer_module():
     path = ROOT / (SHARED.replace(".", "/") + ".py")
-    project = {name for name in imported_modules(path) if name.split(".")[0] in PACKAGES}
+    project = {
+        name for name in imported_modules(path.read_text()) if name.split(".")[0] in PACKAGES
+    }
     # the wire's messages and its errors (which protocol.messages imports itself)
     assert project <= {"protocol.messages", "protocol.errors"}, project
 
 
 def test_the_check_sees_imports_inside_functions():
-    assert "clients" in imported_packages(ROOT / COMPOSITION_ROOT / "runs.py")
+    runs = COMPOSITION_ROOT + "runs.py"
+    assert any(name.startswith("clients.") for name in imported_modules((ROOT / runs).read_text()))
     assert len(MODULES) > 50

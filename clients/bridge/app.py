@@ -42,7 +42,7 @@ from clients.bridge.joint_map import JointMap
 from clients.bridge.loop import Bridge, BridgeReport, Pacer
 from clients.bridge.plant import RealTimePacer
 from clients.client import ControllerClient, CurveKeys
-from clients.sim.model_file import describe_model, hello_model
+from clients.physics.model_file import describe_model, hello_model
 from clients.track import RunObserver, Track
 
 if TYPE_CHECKING:

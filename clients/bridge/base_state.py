@@ -23,7 +23,7 @@ from protocol.messages import ImuSample, Welcome
 
 if TYPE_CHECKING:
     from clients.bridge.plant import Plant
-    from clients.sim.imu import SimulatedImu
+    from clients.physics.imu import SimulatedImu
 
 __all__ = [
     "BaseReading",
@@ -113,7 +113,7 @@ class SupportFlags:
     """The simulated robot's feet flagged in support, as ``poise sim`` flags them.
 
     A touching foot once its normal force exceeds the threshold, until it
-    lifts off (:func:`clients.sim.runner.support_flags`).
+    lifts off (:func:`clients.physics.status.support_flags`).
     """
 
     def __init__(self, plant: Plant, support_force_threshold_N: float):
@@ -123,7 +123,7 @@ class SupportFlags:
 
     def read(self) -> list[bool]:
         """The flags now."""
-        from clients.sim.runner import support_flags
+        from clients.physics.status import support_flags
 
         backend = self.plant.backend
         self._flags = support_flags(
@@ -160,7 +160,7 @@ class SimulatorBase:
 class SimulatedImuBase:
     """The simulated robot's IMU and support flags: an :class:`ImuSource` for emulation.
 
-    The IMU is a :class:`~clients.sim.imu.SimulatedImu` that the plant
+    The IMU is a :class:`~clients.physics.imu.SimulatedImu` that the plant
     updates after every physics step (:meth:`~clients.bridge.plant.Plant.add_sensor`);
     feet are flagged in support by :class:`SupportFlags`, as for
     :class:`SimulatorBase`.

@@ -35,9 +35,10 @@ from pydantic import (
     model_validator,
 )
 
-from clients.sim.imu import ImuSpec
-from clients.sim.model_file import body_names, describe_model, resolve_model_path
-from clients.sim.scenario import PushSpec, explain
+from clients.explain import explain
+from clients.physics.backend import PushSpec
+from clients.physics.imu import ImuSpec
+from clients.physics.model_file import body_names, describe_model, resolve_model_path
 from protocol.errors import PoiseError, did_you_mean
 from protocol.messages import Welcome
 
@@ -256,7 +257,7 @@ class EmulationSpec(_Record):
     imu: ImuSpec = Field(
         default_factory=ImuSpec,
         description='The emulated IMU\'s rate and errors (`base_state = "imu"`, '
-        '`source = "emulated"`): the keys of `clients.sim.imu.ImuSpec` but its mount, '
+        '`source = "emulated"`): the keys of `clients.physics.imu.ImuSpec` but its mount, '
         "which `[imu]` gives. Default: a BMI088 at 1 kHz with an orientation output.",
     )
 

@@ -32,8 +32,9 @@ from clients.bridge.joint_map import JointMap
 from clients.bridge.plant import Plant, PlantPacer, RealTimePacer
 from clients.bridge.protocols.damiao import DAMIAO_MOTOR_MODELS
 from clients.bridge.protocols.mit import MIT_MOTOR_MODELS
-from clients.sim.imu import ImuSpec, SimulatedImu
-from clients.sim.runner import physics_backend, standing_state
+from clients.physics.backend import physics_backend
+from clients.physics.imu import ImuSpec, SimulatedImu
+from clients.physics.status import standing_state
 from protocol.messages import Welcome
 
 __all__ = ["Emulation", "emulated_imu_spec"]

@@ -21,15 +21,15 @@ import numpy as np
 
 from clients.bridge.emulators.motor import EmulatedMotor
 from clients.bridge.joint_map import JointMap
-from clients.sim.backend import PhysicsBackend, Push
-from clients.sim.runner import fall_reason
+from clients.physics.backend import PhysicsBackend, Push
+from clients.physics.status import fall_reason
 from clients.state import RobotState
 
 __all__ = ["Plant", "PlantPacer", "PlantSensor", "RealTimePacer"]
 
 
 class PlantSensor(Protocol):
-    """A sensor on the simulated robot (e.g. :class:`~clients.sim.imu.SimulatedImu`)."""
+    """A sensor on the simulated robot (e.g. :class:`~clients.physics.imu.SimulatedImu`)."""
 
     def reset(self, state: RobotState, time_s: float) -> None:
         """Start over at ``state`` (the plant's reset, or the sensor's mounting)."""

@@ -14,12 +14,11 @@ from clients.server_process import ServerProcess
 from clients.sim.metrics import compute_metrics, start_pose_note
 from clients.sim.output import OutputDirectory
 from clients.sim.plots import plot_run, plot_walk_paths
-from clients.sim.runner import RunRecord, run_scenario
+from clients.sim.runner import RunRecord, run_scenario, track_of_run
 from clients.sim.scenario import Scenario, load_scenario
 from clients.sim.series import save_series
 from clients.track import RunObserver
 from clients.visual.gl import choose_headless_gl
-from clients.visual.track import track_of_run
 from clients.visual.video import write_video
 
 __all__ = ["run_scenarios", "server_endpoint"]

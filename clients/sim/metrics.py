@@ -9,7 +9,7 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from clients.layout import joint_slices
-from clients.sim.model_file import describe_model
+from clients.physics.model_file import describe_model
 from clients.sim.runner import RunRecord
 from clients.sim.scenario import Scenario, scenario_warnings
 

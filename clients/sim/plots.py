@@ -33,9 +33,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from clients.physics.backend import PushSpec
 from clients.sim.metrics import base_estimate_error_series
 from clients.sim.runner import RunRecord
-from clients.sim.scenario import PushSpec
 from protocol.messages import Command, JointInfo
 
 if TYPE_CHECKING:
@@ -433,8 +433,8 @@ def draw_walk_paths(record: RunRecord) -> Figure:
     plt = _pyplot()
     import pinocchio as pin
 
+    from clients.physics.model_file import describe_model
     from clients.sim.metrics import touchdowns, walking_metrics
-    from clients.sim.model_file import describe_model
 
     model = describe_model(record.scenario.model).model
     data = model.createData()

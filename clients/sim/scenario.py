@@ -8,7 +8,7 @@ dragged). Built-in scenarios (thesis ch. 7) live in
 ``clients/sim/scenarios/`` and load by name.
 
 A built-in scenario runs on any biped (``--model``), so it says what it
-needs in the robot's terms (:mod:`clients.sim.robot_terms`): a crouch as a
+needs in the robot's terms (:mod:`clients.physics.robot_terms`): a crouch as a
 knee bend (``initial_knee_bend_rad``), pushes on ``trunk`` or ``root`` (or
 ``chest``, ``torso``, ``abdomen``, ``pelvis`` on a robot without a body of
 that name), a twist as a yaw rate (``twist_yaw_rate_rad_per_s``), turned
@@ -19,16 +19,16 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from types import UnionType
-from typing import Any, Literal, Union, get_args, get_origin
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from clients.sim.backend import Push
-from clients.sim.errors import ScenarioError, ScenarioNotFound
-from clients.sim.imu import ImuSpec
-from clients.sim.model_file import DescriptionError, body_names, describe_model
-from clients.sim.robot_terms import (
+from clients.explain import explain
+from clients.physics.backend import PushSpec
+from clients.physics.errors import ScenarioError, ScenarioNotFound
+from clients.physics.imu import ImuSpec
+from clients.physics.model_file import DescriptionError, body_names, describe_model
+from clients.physics.robot_terms import (
     RobotTermsError,
     crouched_joint_positions,
     resolve_body,
@@ -40,11 +40,9 @@ from protocol.messages import ContactSpec
 __all__ = [
     "SCENARIO_DIR",
     "ParamChange",
-    "PushSpec",
     "Scenario",
     "builtin_scenario_names",
     "controller_params",
-    "explain",
     "initial_configuration",
     "initial_joint_positions",
     "load_scenario",
@@ -52,30 +50,6 @@ __all__ = [
 ]
 
 SCENARIO_DIR = Path(__file__).parent / "scenarios"
-
-
-class PushSpec(BaseModel):
-    """An external push (thesis ch. 7.1)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    body: str = Field(
-        description="Body the force acts on, e.g. `chest`; `trunk` is the robot's heaviest "
-        "segment outside the legs and `root` its root body (as are `chest`, `torso`, "
-        "`abdomen` and `pelvis` on a robot without a body of that name)."
-    )
-    force_in_world_N: tuple[float, float, float] = Field(description="Force (N), world axes.")
-    point_in_body_m: tuple[float, float, float] = Field(
-        default=(0.0, 0.0, 0.0), description="Application point in the body frame (m)."
-    )
-    start_s: float = Field(ge=0.0, description="Start time (s).")
-    duration_s: float = Field(gt=0.0, le=10.0, description="Duration (s).")
-
-    def to_push(self) -> Push:
-        """The backend's push."""
-        return Push(
-            self.force_in_world_N, self.body, self.point_in_body_m, self.start_s, self.duration_s
-        )
 
 
 class ParamChange(BaseModel):
@@ -268,7 +242,7 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> Scenario:
     try:
         scenario = Scenario.model_validate(data)
     except ValidationError as exc:
-        raise ScenarioError(f"scenario {str(name_or_path)!r}: {explain(exc)}") from exc
+        raise ScenarioError(f"scenario {str(name_or_path)!r}: {explain(exc, Scenario)}") from exc
     try:
         describe_model(scenario.model, contacts=scenario.contacts, keyframe=scenario.keyframe)
     except FileNotFoundError as exc:
@@ -407,55 +381,3 @@ def controller_params(scenario: Scenario) -> dict[str, Any]:
             vertical_inertia(description, initial_configuration(scenario))
         )
     return params
-
-
-def explain(error: ValidationError, root: type[BaseModel] | None = None) -> str:
-    """A file's validation errors on one line, each with what to write instead.
-
-    An unknown key gets the closest known key of the table it is in ("did
-    you mean"), a joint position given as a number the shape it needs; the
-    others pydantic's message, the key path and the value given.
-
-    Args:
-        error: What pydantic found.
-        root: The model the whole file validates as (default :class:`Scenario`).
-    """
-    root = Scenario if root is None else root
-    return "; ".join(_explain_one(details, root) for details in error.errors())
-
-
-def _record_at(root: type[BaseModel], location: tuple[Any, ...]) -> type[BaseModel]:
-    """The model of the table at ``location`` (field names, list indices, dict keys)."""
-    current: Any = root
-    for part in location:
-        if isinstance(current, type) and issubclass(current, BaseModel):
-            field = current.model_fields.get(str(part))
-            if field is None:
-                return root
-            current = field.annotation
-        else:  # an item of a list or a value of a dict: its (last) type argument
-            arguments = [arg for arg in get_args(current) if arg is not type(None)]
-            current = arguments[-1] if arguments else None
-        # list[X] | None: unwrap the optional
-        arguments = [arg for arg in get_args(current) if arg is not type(None)]
-        if get_origin(current) in (Union, UnionType) and len(arguments) == 1:
-            current = arguments[0]
-    return current if isinstance(current, type) and issubclass(current, BaseModel) else root
-
-
-def _explain_one(details: Any, root: type[BaseModel]) -> str:
-    location = tuple(details["loc"])
-    where = ".".join(str(part) for part in location)
-    if details["type"] == "extra_forbidden":
-        known = list(_record_at(root, location[:-1]).model_fields)
-        hint = did_you_mean(str(location[-1]), known).rstrip()
-        return f"unknown key {where!r}; {hint or 'known keys: ' + ', '.join(known)}"
-    if location[:1] == ("initial_joint_position",) and len(location) == 2:
-        return (
-            f"{where} = {details['input']!r}: give a list with one number per coordinate of "
-            "the joint, e.g. [0.3] for a hinge, [x, y, z, w] (a quaternion) for a ball joint"
-        )
-    if details["type"] == "missing":
-        return f"missing key {where!r}"
-    message = str(details["msg"]).removeprefix("Value error, ")
-    return f"{where}: {message} (got {details['input']!r})" if where else message

@@ -9,7 +9,7 @@ chosen from the pair's own results, so every pair tries the same forces and
 reaches the same answer whatever the pool.
 
 Beside each answer the sweep gives the robot's own no-step bound
-(:func:`~clients.sim.robot_terms.no_step_bound`): the largest impulse
+(:func:`~clients.physics.robot_terms.no_step_bound`): the largest impulse
 (N·s) it could take on both feet without stepping, from its standing pose
 and soles, and the impulse survived (force × duration) as a share of it.
 
@@ -35,13 +35,14 @@ from pathlib import Path
 from typing import Any
 
 from clients.client import CurveKeys, ServerTimeout
+from clients.physics.backend import PushSpec
+from clients.physics.errors import ScenarioError
+from clients.physics.model_file import describe_model
+from clients.physics.robot_terms import NoStepBound, RobotTermsError, no_step_bound, resolve_body
 from clients.pool import BATCH_DEADLINE_S, RunPool, Task
 from clients.progress import ProgressBar
-from clients.sim.errors import ScenarioError
-from clients.sim.model_file import describe_model
-from clients.sim.robot_terms import NoStepBound, RobotTermsError, no_step_bound, resolve_body
 from clients.sim.runner import run_scenario
-from clients.sim.scenario import PushSpec, Scenario, initial_configuration, load_scenario
+from clients.sim.scenario import Scenario, initial_configuration, load_scenario
 from protocol.errors import ErrorCode
 
 __all__ = [
@@ -481,7 +482,7 @@ def sweep_controllers(
     ``"complete": false`` (:func:`write_sweep`).
 
     The push's body is the robot's (``chest`` on a robot without one: its trunk,
-    :func:`~clients.sim.robot_terms.resolve_body`), checked before the first trial.
+    :func:`~clients.physics.robot_terms.resolve_body`), checked before the first trial.
 
     Raises:
         ScenarioError: The scenario cannot run, or the robot has no such push body.

@@ -1,6 +1,6 @@
 """The robot of a track posed in MuJoCo: what the video and the live view draw.
 
-The MuJoCo model is the simulator's own (:class:`~clients.sim.mujoco_backend.MujocoBackend`:
+The MuJoCo model is the simulator's own (:class:`~clients.physics.mujoco_backend.MujocoBackend`:
 the same file, floor and joint order), so a run of either backend, or a
 recorded log, is drawn by setting each state (wire conventions; the
 quaternion reordered to MuJoCo's ``w x y z`` by the backend) and running
@@ -12,7 +12,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from clients.sim.mujoco_backend import MujocoBackend
+from clients.physics.mujoco_backend import MujocoBackend
 from clients.state import RobotState
 from clients.track import Track
 

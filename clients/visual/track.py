@@ -1,6 +1,6 @@
-"""What a picture of a run is drawn from: a :class:`~clients.track.Track` of a run or a log.
+"""What a picture of a log is drawn from: the :class:`~clients.track.Track` of a recorded log.
 
-A simulator run gives the backend's true states (:func:`track_of_run`); a
+(A simulator run gives the backend's true states: :func:`clients.sim.runner.track_of_run`.) A
 recorded log gives the states its client sent (:func:`track_of_log`), and for
 a state that carried an IMU reading instead of the base, the base the server
 estimated (its diagnostics' ``base_estimate``, held between diagnostics ticks).
@@ -12,12 +12,11 @@ import os
 from pathlib import Path
 
 from clients.replay import read_recorded
-from clients.sim.runner import track_of_run
 from clients.track import Track, session_track
 from protocol.messages import Command, State
 from protocol.recording import BadLog
 
-__all__ = ["Track", "track_of_log", "track_of_run"]
+__all__ = ["Track", "track_of_log"]
 
 
 def track_of_log(path: str | os.PathLike[str], model_dir: Path | None = None) -> Track:

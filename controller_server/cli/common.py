@@ -53,8 +53,8 @@ def as_usage_error(exc: Exception) -> UsageError | None:
     from clients.bridge.config import BridgeConfigError
     from clients.bridge.loop import BridgeStartError
     from clients.client import ServerError, ServerTimeout
+    from clients.physics.errors import ScenarioError, UnsupportedModel
     from clients.pool import ClusterUnavailable
-    from clients.sim.errors import ScenarioError, UnsupportedModel
     from clients.sim.output import OutputUnusable
     from clients.visual.gl import RenderingUnavailable
     from clients.visual.live_process import LiveViewError

@@ -31,7 +31,7 @@ _ACTUATOR_NOTES = {
 
 
 def _inspect(args: argparse.Namespace) -> int:
-    from clients.sim.model_file import describe_model
+    from clients.physics.model_file import describe_model
     from protocol.messages import ContactSpec
 
     contacts = (

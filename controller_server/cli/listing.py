@@ -82,12 +82,12 @@ def _list_lines(what: str, model: str | None, full: bool = False) -> list[str]:
             lines.append(f"{name:<26}{description}".rstrip())
         return lines
     if what == "models":
-        from clients.sim.model_file import builtin_model_names
+        from clients.physics.model_file import builtin_model_names
 
         return builtin_model_names()
     if what == "controllers":
         return [f"{name}{'  (default)' if name == 'momentum' else ''}" for name in CONTROLLER_NAMES]
-    from clients.sim.model_file import body_names, hello_model
+    from clients.physics.model_file import body_names, hello_model
     from controller_server.errors import ModelError
     from controller_server.models import load_robot_model
 

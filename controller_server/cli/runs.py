@@ -32,10 +32,10 @@ def _sim(args: argparse.Namespace) -> int:
         option = "--dask" if args.dask else f"--workers {args.workers}"
         raise UsageError(f"--view shows the runs of this process, one at a time: drop {option}")
     prepare_video(args)
+    from clients.physics.backend import PushSpec
     from clients.pool import RunPool, default_workers
     from clients.sim.app import run_scenarios
     from clients.sim.output import OutputDirectory
-    from clients.sim.scenario import PushSpec
     from clients.sim.sweep import SWEEP_DIRECTIONS, sweep_controllers, sweep_entries
 
     overrides = {}

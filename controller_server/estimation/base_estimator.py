@@ -76,8 +76,8 @@ from controller_server.estimation.inekf import (
     propagate_mean,
 )
 from controller_server.estimation.leg_kinematics import LegKinematics
-from controller_server.estimation.lie import sek3_exp, skew
-from controller_server.spatial import cross
+from controller_server.estimation.lie import sek3_exp
+from controller_server.math.spatial import cross, skew
 
 __all__ = ["BaseEstimator"]
 

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller_server.estimation.lie import sek3_adjoint, skew, so3_gammas
+from controller_server.estimation.lie import sek3_adjoint, so3_gammas
+from controller_server.math.spatial import skew
 
 __all__ = [
     "error_dynamics_matrix",

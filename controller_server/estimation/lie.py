@@ -19,11 +19,12 @@ import math
 
 import numpy as np
 
+from controller_server.math.spatial import skew
+
 __all__ = [
     "sek3_adjoint",
     "sek3_exp",
     "sek3_log",
-    "skew",
     "so3_exp",
     "so3_gamma",
     "so3_gammas",
@@ -62,12 +63,6 @@ def _gamma_coefficients(phi: np.ndarray) -> tuple[float, float, float, float]:
         (theta - sin) / (t2 * theta),
         (t2 + 2.0 * cos - 2.0) / (2.0 * t2 * t2),
     )
-
-
-def skew(vector: np.ndarray) -> np.ndarray:
-    """The matrix ``[v]×`` with ``[v]× w = v × w``."""
-    x, y, z = vector
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def so3_gamma(phi: np.ndarray, order: int) -> np.ndarray:

@@ -28,7 +28,7 @@ from controller_server.features.swing_twist import (
     swing_twist,
     twist_angle,
 )
-from controller_server.spatial import cross
+from controller_server.math.spatial import cross
 
 if TYPE_CHECKING:
     from collections.abc import Iterable

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from controller_server.solvers.damped import damping_for_gain_bound
+from controller_server.math.damped import damping_for_gain_bound
 
 __all__ = ["critical_damping", "setpoint_acceleration", "target_acceleration"]
 

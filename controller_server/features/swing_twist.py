@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller_server.spatial import cross
+from controller_server.math.spatial import cross
 
 __all__ = ["SwingCone", "compose", "cones_contain_units", "rotate", "swing_twist", "twist_angle"]
 

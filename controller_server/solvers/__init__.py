@@ -1,6 +1,5 @@
 """Solvers for the controllers' optimization problems."""
 
-from controller_server.solvers.damped import damped_solve_psd, damping_for_gain_bound
 from controller_server.solvers.kkt import (
     KKTSolution,
     WeightedProblem,
@@ -14,8 +13,6 @@ __all__ = [
     "PrioritizedSolution",
     "WeightedProblem",
     "build_weighted_problem",
-    "damped_solve_psd",
-    "damping_for_gain_bound",
     "solve_prioritized",
     "solve_weighted_kkt",
 ]

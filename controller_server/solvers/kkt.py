@@ -9,7 +9,7 @@ Macchietto 2008, Appendix D::
 
 Both linear solves are damped least squares (Maciejewski 1990, eq. 15–18)
 with damping chosen from the smallest singular value so a gain bound holds
-(:mod:`controller_server.solvers.damped`):
+(:mod:`controller_server.math.damped`):
 
 * the objective stack ``W^{½} A`` with bound ``B_obj``: ``M ← M + λ_obj² I``.
   Unknowns that no objective touches (σ = 0, e.g. the root translation) get
@@ -33,7 +33,7 @@ import numpy as np
 
 from controller_server.constraints import Equality
 from controller_server.features.objective import Objective
-from controller_server.solvers.damped import DampedFactor, damped_cholesky, damped_solve_psd
+from controller_server.math.damped import DampedFactor, damped_cholesky, damped_solve_psd
 
 __all__ = ["KKTSolution", "WeightedProblem", "build_weighted_problem", "solve_weighted_kkt"]
 

@@ -36,7 +36,7 @@ level); the default ``B = 10⁶`` assumes that.
 
 Damping (Maciejewski 1990, eq. 15–19): each singular direction gets its
 own ``λᵢ = damping_for_gain_bound(σᵢ, B)``
-(:mod:`controller_server.solvers.damped`). The directions a level keeps
+(:mod:`controller_server.math.damped`). The directions a level keeps
 (``σᵢ ≥ tol ≥ 1/B``) get ``λᵢ = 0``: the level is met exactly there, and
 nothing below can disturb it. The directions passed down get the damped
 gain ``σᵢ / (σᵢ² + λᵢ²) ≤ B`` (eq. 16, 18), which tends to ``B = 1/σᵢ`` as
@@ -150,7 +150,7 @@ from qpsolvers.exceptions import QPError
 from scipy.linalg import lapack as _lapack
 
 from controller_server.features.objective import Objective
-from controller_server.solvers.damped import damping_for_gain_bound
+from controller_server.math.damped import damping_for_gain_bound
 from controller_server.solvers.qp import solve_qp_bounded
 
 __all__ = [

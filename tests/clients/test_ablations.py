@@ -9,8 +9,9 @@ with round-off, so each push is at least 15 N from either threshold.
 
 import pytest
 
+from clients.physics.backend import PushSpec
 from clients.sim.runner import run_scenario
-from clients.sim.scenario import PushSpec, load_scenario
+from clients.sim.scenario import load_scenario
 from clients.sim.sweep import ABLATIONS
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]

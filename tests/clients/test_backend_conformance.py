@@ -5,8 +5,9 @@ import pinocchio as pin
 import pytest
 
 from clients import ControllerClient
-from clients.sim.model_file import builtin_model_path
-from clients.sim.runner import make_backend, standing_state
+from clients.physics.model_file import builtin_model_path
+from clients.physics.status import standing_state
+from clients.sim.runner import make_backend
 from clients.sim.scenario import Scenario
 from clients.state import RobotState
 

@@ -9,8 +9,8 @@ estimate. Fall detection and the errors below use the simulator's truth.
 
 import pytest
 
+from clients.physics.errors import ScenarioError
 from clients.sim.app import run_scenarios
-from clients.sim.errors import ScenarioError
 from clients.sim.scenario import load_scenario
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]

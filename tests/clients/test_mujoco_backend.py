@@ -16,9 +16,9 @@ from scipy.spatial.transform import Rotation
 mujoco = pytest.importorskip("mujoco")
 pin = pytest.importorskip("pinocchio")
 
-from clients.sim.backend import Push  # noqa: E402
-from clients.sim.model_file import resolve_model_path  # noqa: E402
-from clients.sim.mujoco_backend import (  # noqa: E402
+from clients.physics.backend import Push  # noqa: E402
+from clients.physics.model_file import resolve_model_path  # noqa: E402
+from clients.physics.mujoco_backend import (  # noqa: E402
     GRAVITY_M_S2,
     MujocoBackend,
     SimulationDiverged,

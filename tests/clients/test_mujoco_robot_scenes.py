@@ -15,7 +15,7 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco")
 
-from clients.sim.mujoco_backend import MujocoBackend, UnsupportedModel  # noqa: E402
+from clients.physics.mujoco_backend import MujocoBackend, UnsupportedModel  # noqa: E402
 from clients.sim.runner import run_scenario  # noqa: E402
 from clients.sim.scenario import load_scenario  # noqa: E402
 from clients.state import RobotState  # noqa: E402

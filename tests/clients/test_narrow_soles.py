@@ -13,9 +13,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from clients.sim.model_file import describe_model
+from clients.physics.backend import PushSpec
+from clients.physics.model_file import describe_model
 from clients.sim.runner import run_scenario
-from clients.sim.scenario import PushSpec, load_scenario
+from clients.sim.scenario import load_scenario
 from controller_server.balance_points import polygon_width, support_polygon
 from controller_server.models.description import RobotDescription
 

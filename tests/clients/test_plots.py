@@ -17,8 +17,8 @@ import pytest
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from clients.physics.backend import PushSpec
 from clients.sim.plots import PlotSeries, _side, draw_series, draw_walk_paths
-from clients.sim.scenario import PushSpec
 
 TOP_VIEW = "Ground reference points (top view)"
 TICKS = 600

@@ -13,9 +13,9 @@ import pinocchio as pin
 import pytest
 from scipy.spatial.transform import Rotation
 
-from clients.sim.backend import Push
-from clients.sim.model_file import builtin_model_path, describe_model
-from clients.sim.reference import BodyNotFound, ReferenceBackend, SimulationDiverged
+from clients.physics.backend import Push
+from clients.physics.model_file import builtin_model_path, describe_model
+from clients.physics.reference import BodyNotFound, ReferenceBackend, SimulationDiverged
 from clients.state import RobotState
 
 GRAVITY_M_PER_S2 = 9.81

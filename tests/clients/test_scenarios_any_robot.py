@@ -14,8 +14,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from clients.sim.model_file import describe_model
-from clients.sim.robot_terms import (
+from clients.physics.model_file import describe_model
+from clients.physics.robot_terms import (
     crouched_joint_positions,
     knee_bend_rad,
     leg_pitch_joints,

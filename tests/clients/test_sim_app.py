@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
+from clients.physics.status import support_flags
 from clients.sim.app import run_scenarios
 from clients.sim.metrics import strictly_inside
-from clients.sim.runner import support_flags
 from clients.sim.scenario import SCENARIO_DIR, Scenario, load_scenario
 
 pytestmark = pytest.mark.e2e
@@ -84,8 +84,9 @@ def test_a_touching_foot_supports_once_loaded_until_it_lifts_off():
 def test_foot_slip_and_rotation_are_measured_only_while_supporting(server):
     """A supporting foot that slides 5 cm and yaws 0.1 rad is reported; a lifted one is not."""
     from clients import ControllerClient
+    from clients.physics.status import standing_state
     from clients.sim.metrics import _foot_slip_and_rotation
-    from clients.sim.runner import RunRecord, standing_state
+    from clients.sim.runner import RunRecord
 
     with ControllerClient(server.endpoint, timeout_s=10.0) as client:
         welcome = client.connect("thesis_humanoid")
@@ -211,8 +212,8 @@ def test_an_initial_crouch_keeps_the_soles_on_the_ground():
     (it once kept the straight pose's height, and the robot started 4 cm in the air)."""
     import pinocchio as pin
 
-    from clients.sim.model_file import describe_model
-    from clients.sim.runner import standing_state
+    from clients.physics.model_file import describe_model
+    from clients.physics.status import standing_state
     from controller_server.session import Session
     from protocol.messages import Hello
 

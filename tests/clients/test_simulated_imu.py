@@ -17,17 +17,17 @@ import pinocchio as pin
 import pytest
 from pydantic import ValidationError
 
-import clients.sim.imu as imu_module
-from clients.sim.imu import (
+import clients.physics.imu as imu_module
+from clients.physics.imu import (
     BodyNotFound,
     ImuReading,
     ImuSpec,
     SimulatedImu,
     add_imu_frame,
 )
-from clients.sim.model_file import builtin_model_path
-from clients.sim.mujoco_backend import MujocoBackend
-from clients.sim.reference import ReferenceBackend
+from clients.physics.model_file import builtin_model_path
+from clients.physics.mujoco_backend import MujocoBackend
+from clients.physics.reference import ReferenceBackend
 from clients.state import RobotState
 
 GRAVITY_M_PER_S2 = 9.81

@@ -15,8 +15,8 @@ from typing import ClassVar
 import pytest
 
 import clients.sim.sweep as sweep_module
-from clients.sim.model_file import describe_model
-from clients.sim.robot_terms import RobotTermsError, no_step_bound
+from clients.physics.model_file import describe_model
+from clients.physics.robot_terms import RobotTermsError, no_step_bound
 from controller_server.cli import main
 
 VENDOR = str(Path(__file__).parents[1] / "models" / "vendor_humanoid" / "scene.xml")

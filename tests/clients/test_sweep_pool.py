@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from clients.physics.backend import PushSpec
 from clients.pool import RunPool
 from clients.sim.app import run_scenarios
-from clients.sim.scenario import PushSpec
 from clients.sim.sweep import SWEEP_CONTROLLERS, sweep_controllers
 from controller_server.cli import main
 

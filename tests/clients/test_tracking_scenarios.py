@@ -9,9 +9,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from clients.physics.model_file import builtin_model_path
 from clients.sim.app import run_scenarios
 from clients.sim.metrics import compute_metrics
-from clients.sim.model_file import builtin_model_path
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import load_scenario
 

@@ -33,7 +33,8 @@ from controller_server.estimation.inekf import (
     kinematic_innovation,
     propagate_mean,
 )
-from controller_server.estimation.lie import sek3_exp, sek3_log, skew, so3_exp, so3_gamma, so3_log
+from controller_server.estimation.lie import sek3_exp, sek3_log, so3_exp, so3_gamma, so3_log
+from controller_server.math.spatial import skew
 from controller_server.models import load_robot_model
 
 GRAVITY = np.array([0.0, 0.0, -9.80665])

@@ -8,12 +8,8 @@ from hypothesis import strategies as st
 
 from controller_server.constraints import Equality
 from controller_server.features import Objective
-from controller_server.solvers import (
-    build_weighted_problem,
-    damped_solve_psd,
-    damping_for_gain_bound,
-    solve_weighted_kkt,
-)
+from controller_server.math.damped import damped_solve_psd, damping_for_gain_bound
+from controller_server.solvers import build_weighted_problem, solve_weighted_kkt
 
 
 @settings(max_examples=300, deadline=None)

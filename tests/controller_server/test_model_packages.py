@@ -17,7 +17,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from clients.sim.model_file import hello_model, local_reader
+from clients.physics.model_file import hello_model, local_reader
 from controller_server.errors import ModelError
 from controller_server.models import load_robot_model
 from controller_server.models.description import (

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from clients.sim.model_file import hello_model
+from clients.physics.model_file import hello_model
 from controller_server.asset_cache import AssetCache, read_asset
 from controller_server.session_table import SessionTable
 from protocol import ErrorCode, ProtocolError, decode, encode

@@ -25,8 +25,8 @@ import pytest
 
 from clients import ControllerClient
 from clients.client import ServerError, ServerTimeout
+from clients.physics.model_file import hello_model
 from clients.server_process import ServerProcess
-from clients.sim.model_file import hello_model
 from controller_server.models import BUILTIN_MODELS
 from protocol import PROTOCOL_VERSION, Asset, AssetReceived, ErrorCode, decode, encode
 from protocol.messages import Error, Hello, Welcome

@@ -32,8 +32,8 @@ from clients.bridge.config import (
 from clients.bridge.emulation import emulated_imu_spec
 from clients.bridge.joint_map import JointMap
 from clients.bridge.loop import Bridge
-from clients.sim.imu import SimulatedImu
-from clients.sim.runner import standing_state
+from clients.physics.imu import SimulatedImu
+from clients.physics.status import standing_state
 from clients.state import RobotState
 from protocol.messages import Command, ImuSample, State
 from tests.clients.bridge.test_bridge_config import welcome as one_revolute_joint_per_name

@@ -1,4 +1,4 @@
-"""Errors shared by the simulator backends."""
+"""Errors of the simulated robot and of the scenario files that say what to simulate."""
 
 from __future__ import annotations
 

@@ -61,8 +61,8 @@ import numpy as np
 import pinocchio as pin
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from clients.sim.model_file import body_names, describe_model, resolve_model_path
-from clients.sim.reference import BodyNotFound
+from clients.physics.model_file import body_names, describe_model, resolve_model_path
+from clients.physics.reference import BodyNotFound
 from clients.state import RobotState
 from protocol.messages import ImuSample
 

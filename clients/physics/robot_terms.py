@@ -3,7 +3,7 @@
 A built-in scenario is written once and runs on any biped that ``poise
 inspect`` accepts, so it cannot name one robot's joints or bodies. What it
 needs is found here from the robot's description
-(:func:`~clients.sim.model_file.describe_model`):
+(:func:`~clients.physics.model_file.describe_model`):
 
 * **The legs** (:func:`leg_pitch_joints`): the chain of joints from the
   root to each contact's frame; its *pitch* degrees of freedom are those
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from clients.sim.model_file import RobotDescription
+from clients.physics.model_file import RobotDescription
 
 __all__ = [
     "ROOT_WORDS",

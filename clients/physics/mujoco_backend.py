@@ -12,7 +12,7 @@ effort limits, the robot's body pairs that touch at the standing pose or a
 keyframe (and those its SRDF disables) do not collide, and a URDF's meshes
 reach MuJoCo in memory, one asset per file. Bodies outside the robot (a
 jointed prop in the scene) are left to MuJoCo. It speaks the wire
-conventions of ``docs/protocol.md`` (see :mod:`clients.sim.backend`).
+conventions of ``docs/protocol.md`` (see :mod:`clients.physics.backend`).
 The conversions at the MuJoCo boundary, each
 checked against Pinocchio in ``tests/clients/test_mujoco_backend.py``:
 
@@ -73,15 +73,16 @@ from pathlib import Path, PurePosixPath
 import mujoco
 import numpy as np
 
-from clients.sim.backend import Push, StepReport
-from clients.sim.errors import SimulationDiverged, UnsupportedModel
-from clients.sim.model_file import (
+from clients.physics.backend import Push, StepReport
+from clients.physics.errors import SimulationDiverged, UnsupportedModel
+from clients.physics.model_file import (
     DescriptionError,
     describe_model,
     local_reader,
     model_format,
     resolve_model_path,
 )
+from clients.physics.spatial import cross
 from clients.state import RobotState
 from controller_server.models.description import compile_mjcf, gather_files
 from protocol.messages import ContactSpec
@@ -129,18 +130,6 @@ def _no_log_file() -> None:
 
 
 _no_log_file()
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of ``(n, 3)`` arrays (``np.cross`` is slow on small ones)."""
-    return np.stack(
-        [
-            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
-        ],
-        axis=1,
-    )
 
 
 def _mujoco_spec(path: Path) -> tuple[mujoco.MjSpec, list[str]]:
@@ -916,5 +905,5 @@ class MujocoBackend:
         force = np.matmul(in_contact_frame[:, None, :3], frames)[:, 0]  # frameᵀ f
         torque = np.matmul(in_contact_frame[:, None, 3:], frames)[:, 0]
         lever = contacts.pos[list(index)] - self._reference_points()[list(feet)]
-        np.add.at(wrenches, list(feet), np.hstack([force, torque + _cross(lever, force)]))
+        np.add.at(wrenches, list(feet), np.hstack([force, torque + cross(lever, force)]))
         return wrenches

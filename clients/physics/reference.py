@@ -56,14 +56,15 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from clients.sim.backend import ContactPoint, Push, StepReport
-from clients.sim.errors import SimulationDiverged, UnsupportedModel
-from clients.sim.model_file import (
+from clients.physics.backend import ContactPoint, Push, StepReport
+from clients.physics.errors import SimulationDiverged, UnsupportedModel
+from clients.physics.model_file import (
     DescriptionError,
     contact_points,
     describe_model,
     resolve_model_path,
 )
+from clients.physics.spatial import cross, skew
 from clients.state import RobotState
 from controller_server.models.description import RobotDescription, subtree
 from protocol.errors import PoiseError
@@ -98,19 +99,6 @@ class BodyNotFound(PoiseError, KeyError):
         super().__init__(f"no body {name!r} in the model; bodies: {', '.join(available)}")
 
 
-def _skew(vector: np.ndarray) -> np.ndarray:
-    """``[v]×``, the matrix with ``[v]× u = v × u``."""
-    x, y, z = vector
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a × b`` for two 3-vectors (numpy's ``cross`` costs tens of µs per call)."""
-    return np.array(
-        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-    )
-
-
 @dataclass(frozen=True)
 class _ContactBlock:
     """The points of one contact: all fixed to one joint, reported about one site frame.
@@ -141,7 +129,7 @@ class _ContactBlock:
         cls, joint: int, points: slice, points_in_joint: np.ndarray, site: np.ndarray
     ) -> _ContactBlock:
         """A block with its skew matrices precomputed."""
-        skew_stack = np.vstack([_skew(p) for p in points_in_joint]).reshape(-1, 3)
+        skew_stack = np.vstack([skew(p) for p in points_in_joint]).reshape(-1, 3)
         homogeneous = np.hstack(
             [np.vstack([points_in_joint, site]), np.ones((len(points_in_joint) + 1, 1))]
         )
@@ -191,7 +179,7 @@ _TANGENTIAL = _TangentialRows()
 class ReferenceBackend:
     """Pinocchio ABA + penalty contact + semi-implicit Euler (Macchietto 2008, ch. 4.3).
 
-    Implements :class:`clients.sim.backend.PhysicsBackend`. Starts standing in
+    Implements :class:`clients.physics.backend.PhysicsBackend`. Starts standing in
     the standing pose (the keyframe's, or the file's), at rest.
 
     Args:
@@ -651,7 +639,7 @@ class ReferenceBackend:
             )
             force_in_joint = data.oMi[joint].rotation.T @ force_in_world
             fext[joint] = fext[joint] + pin.Force(
-                force_in_joint, _cross(point_in_joint, force_in_joint)
+                force_in_joint, cross(point_in_joint, force_in_joint)
             )
             self._pushed_joints.add(joint)
 

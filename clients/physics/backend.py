@@ -13,13 +13,22 @@ simulator (Pinocchio ABA with penalty contact) and MuJoCo.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 from clients.state import RobotState
+from protocol.messages import ContactSpec
 
-__all__ = ["ContactPoint", "PhysicsBackend", "Push", "StepReport"]
+__all__ = [
+    "ContactPoint",
+    "PhysicsBackend",
+    "Push",
+    "PushSpec",
+    "StepReport",
+    "physics_backend",
+]
 
 
 @dataclass(frozen=True)
@@ -54,6 +63,30 @@ class Push:
         return self.start_s <= time_s < self.start_s + self.duration_s
 
 
+class PushSpec(BaseModel):
+    """An external push (thesis ch. 7.1)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    body: str = Field(
+        description="Body the force acts on, e.g. `chest`; `trunk` is the robot's heaviest "
+        "segment outside the legs and `root` its root body (as are `chest`, `torso`, "
+        "`abdomen` and `pelvis` on a robot without a body of that name)."
+    )
+    force_in_world_N: tuple[float, float, float] = Field(description="Force (N), world axes.")
+    point_in_body_m: tuple[float, float, float] = Field(
+        default=(0.0, 0.0, 0.0), description="Application point in the body frame (m)."
+    )
+    start_s: float = Field(ge=0.0, description="Start time (s).")
+    duration_s: float = Field(gt=0.0, le=10.0, description="Duration (s).")
+
+    def to_push(self) -> Push:
+        """The backend's push."""
+        return Push(
+            self.force_in_world_N, self.body, self.point_in_body_m, self.start_s, self.duration_s
+        )
+
+
 @dataclass
 class StepReport:
     """What happened in one physics step (for metrics)."""
@@ -85,3 +118,35 @@ class PhysicsBackend(Protocol):
 
     def step(self, joint_torque: np.ndarray, pushes: list[Push]) -> StepReport:
         """Advance one time step with these joint torques (wire order) and active pushes."""
+
+
+def physics_backend(
+    backend: str,
+    model: str,
+    physics_rate_hz: float,
+    friction_coefficient: float,
+    *,
+    contacts: list[ContactSpec] | None = None,
+    keyframe: str | None = None,
+    mujoco_contact_time_constant_s: float | None = None,
+) -> PhysicsBackend:
+    """A backend by name (``reference`` or ``mujoco``) for ``model``, at a rate and friction.
+
+    ``mujoco_contact_time_constant_s`` is MuJoCo's floor contact time constant (``None``: the
+    model's); the reference simulator has its own penalty contact and ignores it.
+    """
+    options: dict[str, Any] = {
+        "friction_coefficient": friction_coefficient,
+        "timestep_s": 1.0 / physics_rate_hz,
+        "contacts": contacts,
+        "keyframe": keyframe,
+    }
+    if backend == "mujoco":
+        from clients.physics.mujoco_backend import MujocoBackend
+
+        return MujocoBackend(
+            model, contact_time_constant_s=mujoco_contact_time_constant_s, **options
+        )
+    from clients.physics.reference import ReferenceBackend
+
+    return ReferenceBackend(model, **options)

@@ -1,10 +1,10 @@
-"""Small 3-D vector helpers shared by the dynamics modules."""
+"""Small 3-D vector helpers: the cross product, its matrix and the point-to-origin wrench map."""
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["cross", "wrench_map"]
+__all__ = ["cross", "skew", "wrench_map"]
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -16,6 +16,12 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def skew(vector: np.ndarray) -> np.ndarray:
+    """The matrix ``[v]×`` with ``[v]× w = v × w``."""
+    x, y, z = vector
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def wrench_map(offsets: np.ndarray) -> np.ndarray:

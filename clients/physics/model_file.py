@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from clients.sim.backend import ContactPoint
+from clients.physics.backend import ContactPoint
 from controller_server.models.description import (
     DescriptionError,
     FileReader,
