@@ -1,7 +1,8 @@
 """Standing and twisting jumps (de Lasa, Mordatch & Hertzmann 2010, §5, Fig. 2).
 
-The state machine changes the balance controller's references, weights and
-priorities as the jump goes (every change goes through the parameters):
+The state machine sets the balance controller's references, weights and
+priorities as the jump goes (its :class:`Targets`, applied for each tick over
+the client's parameters):
 
 * ``stand``: balance for ``jump_delay_s``. The pose the jump starts from is
   the rest pose throughout: bent knees keep the CM height controllable (at
@@ -39,8 +40,9 @@ priorities as the jump goes (every change goes through the parameters):
 * ``recover`` once the CM moves up again (or after :data:`IMPACT_HOLD_S`): a
   target objective brings the CM back to its starting height over
   ``jump_recover_duration_s``.
-* ``done``: every weight, priority, gain and mask is back to its value
-  before the jump; the robot keeps standing in the pose it jumped from.
+* ``done``: every weight, priority, gain and mask is back to the client's;
+  the robot keeps standing in the pose it jumped from, at the CM height it
+  jumped from, its trunk facing the way its feet landed.
 
 A twisting jump can twist its body in the air too (``jump_flight_twist``,
 0 by default): from take-off the spine (the ball joints that carry the arms
@@ -71,7 +73,9 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from controller_server.behaviors.behavior import Behavior, FeetFromCom, Targets
 from controller_server.behaviors.observation import Observation
+from controller_server.models import RobotModel
 from controller_server.params import ParamSpec
 
 __all__ = ["JUMP_PARAMETERS", "JUMP_STATES", "StandingJump"]
@@ -157,72 +161,52 @@ JUMP_PARAMETERS: dict[str, ParamSpec] = {
 }
 """The jump's parameters (``set_params``), documented in docs/controllers.md."""
 
-_CHANGED = (
-    "reference_joint_position",
-    "com_height",
-    "com_height_velocity",
-    "com_height_duration_s",
-    "priority_com_height",
-    "priority_pose",
-    "priority_trunk",
-    "weight_com_height",
-    "weight_contact",
-    "weight_com",
-    "weight_ankle",
-    "weight_trunk",
-    "weight_angular_momentum",
-    "reference_angular_momentum",
-    "support_mask",
-    "pose_stiffness",
-)
-"""Every parameter the jump sets; ``done`` puts them back (but the rest pose and the CM
-height, which stay those of the pose it jumped from)."""
 
-
-class StandingJump:
+class StandingJump(Behavior):
     """One standing (or twisting) jump, from ``stand`` to ``done`` (see the module docstring).
 
-    Args:
-        params: The controller's parameters when the jump starts (restored at ``done``).
-        joint_position: The pose it jumps from (wire order): the rest pose
-            from then on. Its CM height, at the first tick, is the height the
-            landing recovers.
-        standing_com_height: The robot's standing pose's CM height above the
-            ground (m): legs straight, where the thrust aims.
-        model: The robot's model: its spine (:func:`spine_joints`) twists in
-            flight (``jump_flight_twist``); ``None``: no spine.
+    The pose it jumps from (the joints at its first tick) is the rest pose from then on; its
+    CM height then is the height the landing recovers. The thrust aims at the standing
+    pose's CM height (legs straight); the spine (:func:`spine_joints`) twists in flight
+    (``jump_flight_twist``). After ``done`` it keeps asking for that pose and CM height,
+    and for the trunk to face the way the feet landed, until another ``behavior`` is set.
 
     Attributes:
         state: The current state (:data:`JUMP_STATES`).
-        ankle_offsets: ``(contacts, 3)`` each foot's offset from the CM that
-            ``ankle`` holds in flight (``None`` before take-off).
     """
 
-    def __init__(
-        self,
-        params: Mapping[str, Any],
-        joint_position: np.ndarray,
-        standing_com_height: float,
-        model: pin.Model | None = None,
-    ):
-        self.saved = {key: _copy(params[key]) for key in _CHANGED}
-        """The parameters the jump changes, as they were: ``done`` puts them back."""
+    name = "jump"
+    SUMMARY = "one standing (or twisting) jump, de Lasa §5 (the `jump_` parameters)"
+    PARAMETERS = JUMP_PARAMETERS
+    HOSTS = ("prioritized",)
+
+    def __init__(self, robot: RobotModel, gravity: float):
+        super().__init__(robot, gravity)
+        model = robot.model
+        self._reach = float(
+            pin.centerOfMass(model, model.createData(), robot.standing_configuration)[2]
+        )
         self._standing = np.nan  # the CM height it jumps from, set at the first tick
         self._feet_heading = 0.0  # the feet's mean heading then (rad)
-        self._reach = float(standing_com_height)
-        self.state = "stand"
-        self._rest_pose = [float(x) for x in joint_position]
-        self._spine = [] if model is None else spine_joints(model)
+        self._rest_pose: list[float] = []  # the pose it jumps from, set at the first tick
+        self._spine = spine_joints(model)
         self._since_s: float | None = None
-        self.ankle_offsets: np.ndarray | None = None
-        self.foot_rotations: np.ndarray | None = None
+        self._ankle_offsets: np.ndarray | None = None
+        self._foot_rotations: np.ndarray | None = None
         self._airborne = False
         self._left_ground = False
         self._thrust_end_s = np.inf  # when ascent began
         self._flags_since_s = -np.inf  # when the flags last went from some to none or back
 
-    def update(self, observation: Observation, params: Mapping[str, Any]) -> dict[str, Any]:
-        """The parameters to set at this tick (empty when the state does not change)."""
+    def update(self, observation: Observation, params: Mapping[str, Any]) -> Targets:
+        """This tick's targets: the parameters the states so far have set, and ``ankle``'s."""
+        self._advance(observation, params)
+        feet = None
+        if self._foot_rotations is not None:
+            feet = FeetFromCom(self._ankle_offsets, self._foot_rotations)
+        return self._targets(feet_from_com=feet)
+
+    def _advance(self, observation: Observation, params: Mapping[str, Any]) -> None:
         o, p = observation, params
         if self._since_s is None:
             self._since_s = o.time_s
@@ -239,9 +223,11 @@ class StandingJump:
             self._feet_heading = _feet_heading(o.orientation_contact_frames_in_world)
             # The pose it jumps from is the rest pose: bent knees keep the CM height
             # controllable (at straight knees its Jacobian vanishes).
-            return {"reference_joint_position": self._rest_pose}
+            self._rest_pose = [float(x) for x in o.joint_position]
+            self._set(reference_joint_position=self._rest_pose)
+            return
         if self.state == "stand" and elapsed >= p["jump_delay_s"]:
-            return self._enter(
+            self._enter(
                 o,
                 "compress",
                 com_height=self._standing - p["jump_crouch_depth"],
@@ -251,8 +237,9 @@ class StandingJump:
                 priority_trunk=p["jump_com_height_priority"] + 1,
                 weight_com_height=p["jump_com_height_weight"],
             )
+            return
         if self.state == "compress" and elapsed >= p["jump_compress_duration_s"]:
-            return self._enter(
+            self._enter(
                 o,
                 "thrust",
                 com_height=self._reach,
@@ -260,13 +247,15 @@ class StandingJump:
                 com_height_duration_s=p["jump_thrust_duration_s"],
                 reference_angular_momentum=[0.0, 0.0, p["jump_twist_angular_momentum"]],
             )
+            return
         takeoff_height = self._reach - p["jump_takeoff_margin"]
         launched = o.velocity_com_in_world[2] >= 0.5 * p["jump_takeoff_speed"]
         if self.state == "thrust" and (airborne or (launched and height >= takeoff_height)):
             # The feet keep the orientation they stand in (flat) from now to touch-down.
-            self.foot_rotations = o.orientation_contact_frames_in_world.copy()
+            self._foot_rotations = o.orientation_contact_frames_in_world.copy()
             self._thrust_end_s = o.time_s
-            return self._enter(
+            self._unset("priority_pose")
+            self._enter(
                 o,
                 "ascent",
                 weight_contact=0.0,
@@ -275,7 +264,6 @@ class StandingJump:
                 com_height_velocity=0.0,
                 weight_trunk=0.0,
                 weight_angular_momentum=0.0,
-                priority_pose=self.saved["priority_pose"],
                 pose_stiffness=p["jump_flight_pose_stiffness"],
                 weight_ankle=p["jump_ankle_weight"],
                 support_mask=[0.0] * len(o.touching),
@@ -283,18 +271,20 @@ class StandingJump:
                 # the feet still push (measured: the torques saturated).
                 reference_joint_position=self._twisted([float(x) for x in o.joint_position], p),
             )
+            return
         if self.state == "ascent" and not rising:
             if p["jump_flight_twist"] > 0.0:
                 # The legs unwind the thrust's twist and straighten a little to land.
-                return self._enter(
+                self._enter(
                     o, "descent", reference_joint_position=self._twisted(self._rest_pose, p)
                 )
+                return
             self._enter(o, "descent")
         if self.state in ("ascent", "descent") and airborne and not self._left_ground:
             # In the air: the ankles keep the offset from the CM they left the ground with
             # (held while the feet still touch, it pushed the feet into the ground).
             self._left_ground = True
-            self.ankle_offsets = o.position_contact_frames_in_world - o.position_com_in_world
+            self._ankle_offsets = o.position_contact_frames_in_world - o.position_com_in_world
         thrust_failed = self.state == "thrust" and elapsed >= (
             p["jump_thrust_duration_s"] + TAKEOFF_TIMEOUT_S
         )
@@ -306,20 +296,24 @@ class StandingJump:
         # A touch while the CM still rises is the take-off's scuffle, not the landing.
         landed = self.state == "descent" and self._left_ground and grounded
         if thrust_failed or never_left or landed:
-            return self._enter(
+            # The client's own contact, CM, trunk, angular momentum weights, supports and
+            # pose stiffness are back.
+            self._unset(
+                "weight_contact",
+                "weight_com",
+                "weight_trunk",
+                "support_mask",
+                "pose_stiffness",
+                "weight_angular_momentum",
+            )
+            self._enter(
                 o,
                 "impact",
-                weight_contact=self.saved["weight_contact"],
-                weight_com=self.saved["weight_com"],
                 weight_com_height=p["jump_com_height_weight"],
                 weight_ankle=0.0,
-                weight_trunk=self.saved["weight_trunk"],
-                support_mask=self.saved["support_mask"],
                 priority_pose=p["jump_com_height_priority"] + 1,
                 priority_trunk=p["jump_com_height_priority"] + 1,
-                pose_stiffness=self.saved["pose_stiffness"],
                 reference_joint_position=self._rest_pose,
-                weight_angular_momentum=self.saved["weight_angular_momentum"],
                 com_height=float(height),
                 com_height_duration_s=p["jump_landing_duration_s"],
                 reference_angular_momentum=[0.0, 0.0, 0.0],
@@ -330,20 +324,22 @@ class StandingJump:
                     _feet_heading(o.orientation_contact_frames_in_world) - self._feet_heading,
                 ),
             )
+            return
         if self.state == "impact" and (rising or elapsed >= IMPACT_HOLD_S):
-            return self._enter(
+            self._enter(
                 o,
                 "recover",
                 com_height=self._standing,
                 com_height_duration_s=p["jump_recover_duration_s"],
             )
+            return
         if self.state == "recover" and elapsed >= p["jump_recover_duration_s"]:
-            self.ankle_offsets = self.foot_rotations = None
-            # It stands where it jumped from: that pose and CM height stay the references.
-            restored = dict(self.saved, reference_joint_position=self._rest_pose)
-            restored["com_height"] = self._standing
-            return self._enter(o, "done", **restored)
-        return {}
+            self._ankle_offsets = self._foot_rotations = None
+            # It stands where it jumped from, facing the way it landed: that pose, CM height
+            # and trunk heading stay the references, every other parameter is the client's.
+            kept = ("reference_joint_position", "reference_trunk_orientation_xyzw")
+            self._unset(*(name for name in self.overrides if name not in kept))
+            self._enter(o, "done", com_height=self._standing)
 
     def _twisted(self, pose: list[float], params: Mapping[str, Any]) -> list[float]:
         """``pose``, its spine turning the upper body ``jump_flight_twist`` behind the pelvis."""
@@ -354,10 +350,13 @@ class StandingJump:
             pose[start : start + 4] = _turned(pose[start : start + 4], -twist / len(self._spine))
         return pose
 
-    def _enter(self, observation: Observation, state: str, **changes: Any) -> dict[str, Any]:
+    def _enter(self, observation: Observation, state: str, **changes: Any) -> None:
+        """Enter ``state``; a ``com_height`` among ``changes`` is reached by a target objective."""
         self.state = state
         self._since_s = observation.time_s
-        return changes
+        self._set(**changes)
+        if "com_height" in changes:
+            self.com_height_changes += 1
 
 
 def spine_joints(model: pin.Model) -> list[int]:
@@ -393,7 +392,3 @@ def _turned(orientation_xyzw: Any, yaw: float) -> list[float]:
     s, c = float(np.sin(yaw / 2.0)), float(np.cos(yaw / 2.0))
     # [0, 0, s, c] ⊗ [x, y, z, w]
     return [c * x - s * y, c * y + s * x, c * z + s * w, c * w - s * z]
-
-
-def _copy(value: Any) -> Any:
-    return [float(x) for x in value] if isinstance(value, np.ndarray) else value

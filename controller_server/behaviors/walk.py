@@ -1,8 +1,9 @@
 """Walking (de Lasa, Mordatch & Hertzmann 2010, §6, Table 2, Fig. 3), with capture-point steps.
 
-The state machine changes the balance controller's references, weights and
-planned supports as the walk goes (every change goes through the
-parameters, as the jump's):
+The state machine sets the balance controller's references, weights and
+planned supports as the walk goes (its :class:`Targets`, as the jump's),
+and asks ``com`` for the capture point's CM acceleration and ``swing`` for the
+swing foot's path:
 
 * ``stand``: both feet support, the balance controller as it is, for
   ``walk_delay_s``; the walk starts once ``walk_speed`` or
@@ -81,8 +82,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from controller_server.behaviors.behavior import Behavior, Targets
 from controller_server.behaviors.observation import Observation
 from controller_server.features.swing_foot import SwingTarget
+from controller_server.models import RobotModel
 from controller_server.params import ParamSpec
 
 __all__ = ["WALK_PARAMETERS", "WALK_STATES", "Walk"]
@@ -227,36 +230,15 @@ WALK_PARAMETERS: dict[str, ParamSpec] = {
 """The walk's parameters (``set_params``, also while walking), documented in
 docs/controllers.md."""
 
-_CHANGED = (
-    "support_mask",
-    "com_offset_xy",
-    "reference_trunk_orientation_xyzw",
-    "reference_joint_position",
-    "priority_pose",
-    "priority_torque",
-    "weight_com_height",
-    "weight_angular_momentum",
-    "priority_com_height",
-    "com_height",
-    "weight_torque",
-    "torque_selection",
-)
-"""Every parameter the walk sets; stopping the walk (another ``behavior``) puts them back."""
-
 ARM_WORDS = ("shoulder", "elbow")
 
 
-class Walk:
+class Walk(Behavior):
     """A walk, from ``stand`` through its steps (see the module docstring).
 
-    Args:
-        params: The controller's parameters when the walk starts (restored when it ends).
-        points_in_frame: Per contact, its ``(k, 3)`` sole points in its frame.
-        joint_position: The pose the walk starts from (wire order): its rest pose.
-        joint_knee_axes: Per joint DoF (wire order of velocities), ``+1`` for the pitch DoF
-            of a knee, ``-0.5`` for that of a hip or ankle, 0 otherwise (``walk_knee_bend``).
-        arm_dofs: Per joint DoF, whether it belongs to a shoulder or an elbow.
-        gravity: ``g`` (m/s²).
+    The pose at its first tick is the pose it starts from (its rest pose, knees bent by
+    ``walk_knee_bend``); the robot's knees, hips and ankles (:func:`knee_bend_direction`)
+    and arms (:func:`arm_dofs`) are found from its joint names.
 
     Attributes:
         state: The current state (:data:`WALK_STATES`).
@@ -266,28 +248,24 @@ class Walk:
         steps: Touch-downs so far.
     """
 
-    def __init__(
-        self,
-        params: Mapping[str, Any],
-        points_in_frame: Sequence[np.ndarray],
-        joint_position: np.ndarray,
-        knee_bend_direction: np.ndarray,
-        arm_dofs: np.ndarray,
-        gravity: float,
-        model: pin.Model | None = None,
-    ):
-        self.saved = {key: _copy(params[key]) for key in _CHANGED}
-        self.state = "stand"
+    name = "walk"
+    SUMMARY = "walking, de Lasa §6 with capture-point footholds (the `walk_` parameters)"
+    PARAMETERS = WALK_PARAMETERS
+    HOSTS = ("prioritized",)
+
+    def __init__(self, robot: RobotModel, gravity: float):
+        super().__init__(robot, gravity)
+        points_in_frame = [np.asarray(contact.points_in_frame) for contact in robot.contacts]
         self.swing: SwingTarget | None = None
         self.com_acceleration_xy: np.ndarray | None = None
         self.steps = 0
-        self._sole_offsets = [np.asarray(points).mean(axis=0) for points in points_in_frame]
-        self._points = [np.asarray(points) for points in points_in_frame]
-        self._start_pose = np.array(joint_position, dtype=float)
-        self._knee_direction = knee_bend_direction
-        self._arm_dofs = arm_dofs
+        self._sole_offsets = [points.mean(axis=0) for points in points_in_frame]
+        self._points = points_in_frame
+        self._start_pose = np.zeros(0)  # the pose it starts from, set at the first tick
+        self._knee_direction = knee_bend_direction(robot.model)
+        self._arm_dofs = arm_dofs(robot.model)
         self._gravity = gravity
-        self._model = model
+        self._model = robot.model
         self._since_s: float | None = None
         self._last_s: float | None = None
         self._heading = 0.0
@@ -303,12 +281,15 @@ class Walk:
 
     # One tick -------------------------------------------------------------------------
 
-    def update(self, observation: Observation, params: Mapping[str, Any]) -> dict[str, Any]:
-        """The parameters to set at this tick (and :attr:`com_acceleration_xy`)."""
+    def update(self, observation: Observation, params: Mapping[str, Any]) -> Targets:
+        """This tick's targets: the parameters it sets, ``com``'s acceleration, ``swing``."""
+        self._advance(observation, params)
+        return self._targets(com_acceleration_xy=self.com_acceleration_xy, swing=self.swing)
+
+    def _advance(self, observation: Observation, params: Mapping[str, Any]) -> None:
         o, p = observation, params
-        changes: dict[str, Any] = {}
         if self._since_s is None:
-            changes.update(self._begin(o, p))
+            self._begin(o, p)
         dt = 0.0 if self._last_s is None else max(o.time_s - self._last_s, 0.0)
         self._last_s = o.time_s
         elapsed = o.time_s - self._since()
@@ -324,7 +305,7 @@ class Walk:
             or p["walk_trunk_lean"] != self._lean
             or (walking and p["walk_turn_rate"])
         ):
-            changes.update(self._posture(p))
+            self._posture(p)
         centers = [
             position + rotation @ offset
             for position, rotation, offset in zip(
@@ -346,9 +327,9 @@ class Walk:
                 self._target_xy = centers[self._stance][:2] + self._offset(
                     p, omega, self._stance, p["walk_swing_duration_s"]
                 )
-                changes.update(self._enter(o, "shift"))
+                self._enter(o, "shift")
             else:
-                return changes
+                return
         elapsed = o.time_s - self._since()
         if self.state in ("shift", "stop"):
             if self.state == "stop":
@@ -359,11 +340,11 @@ class Walk:
             self.com_acceleration_xy = omega**2 * (com_xy - cop)
             done = np.linalg.norm(capture - self._target_xy) < SHIFT_TOLERANCE_M
             if self.state == "shift" and (done or elapsed >= 1.5 * p["walk_shift_duration_s"]):
-                changes.update(self._lift(o, p, centers))
+                self._lift(o, p, centers)
             elif self.state == "stop" and (done or elapsed >= 1.5 * p["walk_shift_duration_s"]):
                 self.com_acceleration_xy = None
-                changes.update(self._enter(o, "stand"), com_offset_xy=self.saved["com_offset_xy"])
-            return changes
+                self._enter(o, "stand")
+            return
         stance_center = centers[self._stance]
         self.com_acceleration_xy = omega**2 * (com_xy - stance_center[:2])
         if self.state == "swing":
@@ -385,23 +366,24 @@ class Walk:
                 self.swing = None
                 self._stance = foot
                 self.steps += 1
-                changes.update(self._enter(o, "double"), support_mask=self.saved["support_mask"])
+                self._enter(o, "double")
+                self._unset("support_mask")
         elif self.state == "double" and elapsed >= p["walk_double_support_s"]:
             feet_apart = np.array(centers[0][:2] - centers[1][:2])
             along = abs(feet_apart @ _direction(self._heading))
             # Forward only: in place the CM still sways sideways from foot to foot.
             at_rest = abs(o.velocity_com_in_world[:2] @ _direction(self._heading)) < STOP_SPEED
             if not command and at_rest and along < 0.1:
-                changes.update(self._enter(o, "stop"))
+                self._enter(o, "stop")
             else:
-                changes.update(self._lift(o, p, centers))
-        return changes
+                self._lift(o, p, centers)
 
     # Transitions ----------------------------------------------------------------------
 
-    def _begin(self, o: Observation, p: Mapping[str, Any]) -> dict[str, Any]:
+    def _begin(self, o: Observation, p: Mapping[str, Any]) -> None:
         """First tick: heading, which foot is left, standing width; the walk's objectives."""
         self._since_s = o.time_s
+        self._start_pose = np.array(o.joint_position, dtype=float)
         x, y, z, w = o.orientation_base_in_world_xyzw
         self._heading = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
         lateral = _direction(self._heading + 0.5 * math.pi)
@@ -411,20 +393,19 @@ class Walk:
         self._left = int(np.argmax(sideways))
         self._width = abs(sideways[0] - sideways[1]) if len(sideways) > 1 else 0.2
         selection = np.where(self._arm_dofs, 1.0, 0.0)
-        changes: dict[str, Any] = {
-            "priority_pose": p["walk_pose_priority"],
-            "weight_com_height": p["walk_com_height_weight"],
-            "priority_com_height": p["walk_com_height_priority"],
-            "weight_angular_momentum": p["walk_angular_momentum_weight"],
-            "com_height": float(o.position_com_in_world[2] - o.ground_height),
-        }
+        self._set(
+            priority_pose=p["walk_pose_priority"],
+            weight_com_height=p["walk_com_height_weight"],
+            priority_com_height=p["walk_com_height_priority"],
+            weight_angular_momentum=p["walk_angular_momentum_weight"],
+            com_height=float(o.position_com_in_world[2] - o.ground_height),
+        )
         if p["walk_arm_torque_weight"] > 0.0 and selection.any():
-            changes.update(
+            self._set(
                 torque_selection=selection.tolist(),
                 weight_torque=p["walk_arm_torque_weight"],
                 priority_torque=p["walk_pose_priority"],
             )
-        return changes
 
     def _learn_speed(self, o: Observation, p: Mapping[str, Any]) -> None:
         """Integrate the relative speed error of the step that ends (``walk_speed_gain``).
@@ -452,13 +433,12 @@ class Walk:
             )
         )
 
-    def _posture(self, p: Mapping[str, Any]) -> dict[str, Any]:
+    def _posture(self, p: Mapping[str, Any]) -> None:
         """Rest pose (knee bend) and trunk reference (heading, lean)."""
-        changes: dict[str, Any] = {}
         bend, lean = float(p["walk_knee_bend"]), float(p["walk_trunk_lean"])
         if bend != self._knee_bend:
             self._knee_bend = bend
-            changes["reference_joint_position"] = self._rest_pose(bend)
+            self._set(reference_joint_position=self._rest_pose(bend))
         self._lean = lean
         half_yaw, half_pitch = 0.5 * self._heading, 0.5 * lean
         # yaw about z, then pitch about the heading's y: q = q_z(ψ) ⊗ q_y(θ), xyzw.
@@ -468,8 +448,7 @@ class Walk:
             math.cos(half_pitch),
             math.sin(half_pitch),
         )
-        changes["reference_trunk_orientation_xyzw"] = [-sz * sy, cz * sy, sz * cy, cz * cy]
-        return changes
+        self._set(reference_trunk_orientation_xyzw=[-sz * sy, cz * sy, sz * cy, cz * cy])
 
     def _rest_pose(self, bend: float) -> list[float]:
         """The starting pose with the knees' pitch bent by ``bend`` (hips, ankles −½ each)."""
@@ -480,9 +459,7 @@ class Walk:
         dq = np.concatenate([np.zeros(6), bend * self._knee_direction])
         return pin.integrate(model, q, dq)[7:].tolist()
 
-    def _lift(
-        self, o: Observation, p: Mapping[str, Any], centers: Sequence[np.ndarray]
-    ) -> dict[str, Any]:
+    def _lift(self, o: Observation, p: Mapping[str, Any], centers: Sequence[np.ndarray]) -> None:
         """The other foot leaves the supports and swings (E_swing on)."""
         foot = 1 - self._stance
         duration_s = self._swing_duration_s(p)
@@ -494,12 +471,14 @@ class Walk:
             position_target_in_world=target - rotation @ self._sole_offsets[foot],
             orientation_target_in_world=rotation,
             step_height=p["walk_step_height"],
+            stiffness=p["walk_swing_stiffness"],
             start_s=o.time_s,
             duration_s=duration_s,
         )
-        mask = [float(x) for x in self.saved["support_mask"]]
+        mask = [float(x) for x in p["support_mask"]]  # the client's: unset since the landing
         mask[foot] = 0.0
-        return {**self._enter(o, "swing"), "support_mask": mask}
+        self._enter(o, "swing")
+        self._set(support_mask=mask)
 
     def _replan(
         self,
@@ -541,6 +520,7 @@ class Walk:
             position_target_in_world=target,
             orientation_target_in_world=rotation,
             step_height=p["walk_step_height"],
+            stiffness=p["walk_swing_stiffness"],
             start_s=swing.start_s,
             duration_s=swing.duration_s,
         )
@@ -587,10 +567,9 @@ class Walk:
         """When the current state began (s; set at the first tick)."""
         return 0.0 if self._since_s is None else self._since_s
 
-    def _enter(self, observation: Observation, state: str) -> dict[str, Any]:
+    def _enter(self, observation: Observation, state: str) -> None:
         self.state = state
         self._since_s = observation.time_s
-        return {}
 
 
 def _direction(angle: float) -> np.ndarray:
@@ -602,5 +581,27 @@ def _yaw_rotation(angle: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def _copy(value: Any) -> Any:
-    return [float(x) for x in value] if isinstance(value, np.ndarray) else value
+def knee_bend_direction(model: pin.Model) -> np.ndarray:
+    """Per joint DoF: +1 on a knee's pitch (local y), −½ on a hip's or an ankle's, else 0."""
+    direction = np.zeros(model.nv - 6)
+    for joint_id in range(2, model.njoints):
+        name, joint = model.names[joint_id], model.joints[joint_id]
+        start = joint.idx_v - 6
+        scale = 1.0 if "knee" in name else -0.5 if ("hip" in name or "ankle" in name) else 0.0
+        kind = joint.shortname()
+        if scale and kind == "JointModelSpherical":
+            direction[start + 1] = scale
+        elif scale and kind == "JointModelRY":
+            direction[start] = scale
+    return direction
+
+
+def arm_dofs(model: pin.Model) -> np.ndarray:
+    """Per joint DoF, whether it belongs to a shoulder or an elbow (E_arms of §6.2)."""
+    arms = np.zeros(model.nv - 6, dtype=bool)
+    for joint_id in range(2, model.njoints):
+        joint = model.joints[joint_id]
+        if any(word in model.names[joint_id] for word in ARM_WORDS):
+            start = joint.idx_v - 6
+            arms[start : start + joint.nv] = True
+    return arms

@@ -5,6 +5,11 @@ for a robot with initial parameters, ``compute`` one tick, read and change
 parameters. Each controller declares its parameters as :class:`ParamSpec`s;
 validation (type, range, length, finiteness) is shared here, so every
 controller refuses bad values the same way, atomically.
+
+Every controller hosts behaviours the same way (:meth:`Controller._host`): the one its
+``behavior`` parameter names observes each tick and answers its
+:class:`~controller_server.behaviors.Targets`, whose parameter values hold over the
+client's for that tick only (:meth:`Controller.in_force`).
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pinocchio as pin
 
+from controller_server.behaviors import BEHAVIORS, Behavior, Observation, Targets
 from controller_server.dynamics import DynamicsTerms
 from controller_server.errors import ControllerFailed, InvalidParams
 from controller_server.models import RobotModel
@@ -172,6 +178,10 @@ class Controller(ABC):
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self.robot = robot
+        self._behavior: Behavior | None = None
+        self._overrides: dict[str, Any] = {}  # the behaviour's parameters, validated
+        self._override_revision = -1
+        self._in_force: dict[str, Any] | None = None  # the client's, the behaviour's over them
         self._params: dict[str, Any] = {key: self.default_value(key) for key in self.PARAMETERS}
         self.set_params(params or {})
 
@@ -210,6 +220,9 @@ class Controller(ABC):
         """
         validated = {key: self._validate(key, value) for key, value in params.items()}
         self._params.update(validated)
+        self._in_force = None
+        if "behavior" in params:  # ends the behaviour under way: the next tick starts anew
+            self._behavior, self._overrides, self._override_revision = None, {}, -1
 
     def _validate(self, key: str, value: Any) -> Any:
         spec = self.PARAMETERS.get(key)
@@ -222,6 +235,12 @@ class Controller(ABC):
         if spec.kind == "choice":
             if value not in spec.choices:
                 raise InvalidParams(field, f"{value=!r}; choose one of {spec.choices}")
+            if key == "behavior" and value in BEHAVIORS and self.name not in BEHAVIORS[value].HOSTS:
+                hosts = ", ".join(BEHAVIORS[value].HOSTS)
+                raise InvalidParams(
+                    field,
+                    f"{value!r} cannot run on the {self.name} controller; it runs on {hosts}",
+                )
             return value
         if spec.kind == "text":
             if not isinstance(value, str):
@@ -254,12 +273,65 @@ class Controller(ABC):
             return int(array[0])
         return float(array[0]) if spec.kind == "float" else array
 
+    def in_force(self) -> dict[str, Any]:
+        """The parameters of this tick: the client's, and the behaviour's over them."""
+        if self._in_force is None:
+            self._in_force = {**self._params, **self._overrides}
+        return self._in_force
+
+    @property
+    def behavior_state(self) -> str:
+        """``balance``, or the state of the behaviour under way (``stand``, ``compress`` …)."""
+        return "balance" if self._behavior is None else self._behavior.state
+
+    def _host(
+        self, control_input: ControlInput, terms: DynamicsTerms, data: pin.Data
+    ) -> Targets | None:
+        """Run the behaviour ``behavior`` names for this tick (``None``: none, or ``balance``).
+
+        It is created at its first tick; its parameter values are validated as a
+        ``set_params`` would validate them (once per revision), and hold over the client's in
+        :meth:`in_force` until it changes them. ``data`` holds this state's frame placements.
+
+        Raises:
+            InvalidParams: The behaviour set a value its host refuses.
+        """
+        name = self._params.get("behavior", "balance")
+        if name == "balance":
+            return None
+        if self._behavior is None:
+            gravity = float(np.linalg.norm(self.robot.model.gravity.linear))
+            self._behavior = BEHAVIORS[name](self.robot, gravity)
+        observation = Observation(
+            time_s=control_input.time_s,
+            position_com_in_world=terms.position_com_in_world,
+            velocity_com_in_world=terms.momentum.linear_momentum / terms.total_mass,
+            touching=control_input.contact_flags,
+            position_contact_frames_in_world=terms.position_contact_frames_in_world,
+            joint_position=control_input.q[7:],
+            orientation_base_in_world_xyzw=control_input.q[3:7],
+            orientation_contact_frames_in_world=np.array(
+                [data.oMf[c.frame_id].rotation for c in self.robot.contacts]
+            ),
+            ground_height=self._params["ground_height"],
+        )
+        targets = self._behavior.update(observation, self.in_force())
+        if targets.revision != self._override_revision:
+            self._overrides = {key: self._validate(key, v) for key, v in targets.params.items()}
+            self._override_revision = targets.revision
+            self._in_force = None
+            self._overrides_changed()
+        return targets
+
+    def _overrides_changed(self) -> None:  # noqa: B027 (a hook: most controllers derive nothing)
+        """Called when the behaviour's parameter values change (drop what was derived)."""
+
     def supports(self, control_input: ControlInput) -> tuple[bool, ...]:
         """Contacts used as supports: flagged by the client and allowed by ``support_mask``."""
         return tuple(
             bool(on and allowed > 0.5)
             for on, allowed in zip(
-                control_input.contact_flags, self._params["support_mask"], strict=True
+                control_input.contact_flags, self.in_force()["support_mask"], strict=True
             )
         )
 

@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 
+from controller_server.behaviors import BEHAVIORS
 from controller_server.controllers import CONTROLLERS
 from controller_server.controllers.momentum import POINT_DEFAULTS, POINT_PREFIX
 
@@ -42,6 +43,18 @@ POINTS = (
 )
 
 
+BEHAVIORS_INTRO = """## Behaviours
+
+A controller's `behavior` parameter starts one of these on the next tick. A
+behaviour observes every tick and sets the controller's task references,
+weights, priorities and planned supports for that tick only: the parameters
+a client reads back stay its own, and `behavior = "balance"` (or another
+behaviour) gives every one back. Naming one the controller cannot host is
+refused with `INVALID_PARAMS`. Their own parameters (`jump_`, `walk_`,
+`sway_`) are in the tables above.
+"""
+
+
 def _default(value: object) -> str:
     if value is None:
         return "model-dependent (see meaning)"
@@ -71,12 +84,11 @@ def render_controllers_doc() -> str:
         )
         if name == "momentum":
             sections.append(doc + "\n\n" + POINTS)
-        if name == "prioritized":
-            from controller_server.behaviors import walk
-
-            sections.append(
-                '### Walking (`behavior = "walk"`)\n\n' + (walk.__doc__ or "").strip() + "\n"
-            )
+    sections.append(BEHAVIORS_INTRO)
+    for name, behavior in BEHAVIORS.items():
+        doc = (sys.modules[behavior.__module__].__doc__ or "").strip()
+        hosts = ", ".join(f"`{host}`" for host in behavior.HOSTS)
+        sections.append(f'### `behavior = "{name}"` (on {hosts})\n\n{doc}\n')
     return "\n".join(sections)
 
 

@@ -37,6 +37,7 @@ from controller_server.balance_points import (
     ground_reference_points,
     support_polygon,
 )
+from controller_server.behaviors import behavior_parameters
 from controller_server.constraints import compute_support_equalities
 from controller_server.controllers.base import (
     CONTACT_PARAMETERS,
@@ -187,6 +188,7 @@ class MomentumController(Controller):
             doc="inverse dynamics with distributed forces, or the state's measured wrenches",
         ),
         **CONTACT_PARAMETERS,
+        **behavior_parameters("momentum"),
         "optimizer_period_ticks": ParamSpec(
             1,
             kind="int",
@@ -241,6 +243,9 @@ class MomentumController(Controller):
         super().__init__(robot, params)
 
     # Parameters -----------------------------------------------------------------
+
+    def _overrides_changed(self) -> None:
+        self._tracking_weight = None
 
     def default_value(self, key: str) -> Any:
         """Joint weights default to ones (the rest: :meth:`Controller.default_value`)."""
@@ -352,7 +357,7 @@ class MomentumController(Controller):
             raise ControllerFailed(f"a linear solve failed at this state: {error}") from error
 
     def _compute(self, control_input: ControlInput) -> ControlOutput:
-        p = self._params
+        p = self.in_force()
         robot, q, v = self.robot, control_input.q, control_input.v
         measured = p["ground_force_mode"] == "measured"
         if measured and control_input.contact_wrench_in_world is None:
@@ -391,6 +396,9 @@ class MomentumController(Controller):
             check_finite_dynamics(terms)
             points, origins = terms.position_points_in_world, terms.position_contact_frames_in_world
             if run_optimizer:
+                # A behaviour runs at the optimizer's rate: its targets steer the next solve.
+                self._host(control_input, terms, self._data)
+                p = self.in_force()
                 polygon = _support_polygon(points, flags)
                 # β_ba's p and g (eq. 5.17) come from the body's measured ground wrench
                 # whenever one is sent, whatever the inverse dynamics uses; without one,
@@ -429,7 +437,7 @@ class MomentumController(Controller):
         )
 
     def _reference(self, control_input: ControlInput) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        p, model = self._params, self.robot.model
+        p, model = self.in_force(), self.robot.model
         if self._clip is not None:
             sample = self._clip.sample(
                 control_input.time_s,
@@ -454,7 +462,7 @@ class MomentumController(Controller):
         flags: tuple[bool, ...],
         polygon: np.ndarray,
     ) -> None:
-        p, model = self._params, self.robot.model
+        p, model = self.in_force(), self.robot.model
         q, v = control_input.q, control_input.v
         q_ref, v_ref, a_ref = self._reference(control_input)
         errors = self._limits.errors(q)
@@ -574,7 +582,7 @@ class MomentumController(Controller):
             motion.position_com_in_world,
             dynamics.contact_wrench_in_world,
             flags,
-            self._params["ground_height"],
+            self.in_force()["ground_height"],
         )
         return {
             "position_com_in_world": motion.position_com_in_world,
@@ -617,6 +625,7 @@ class TrackingController(MomentumController):
     name = "tracking"
     PARAMETERS: ClassVar[dict[str, ParamSpec]] = {
         **MomentumController.PARAMETERS,
+        **behavior_parameters("tracking"),
         "weight_linear_momentum": ParamSpec(
             0.0, minimum=0.0, maximum=1e6, doc="β_bl of eq. 5.1 (off in the baseline)"
         ),

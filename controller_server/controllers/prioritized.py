@@ -55,9 +55,7 @@ from controller_server.balance_points import (
     admissible_cop_polygon,
     ground_reference_points,
 )
-from controller_server.behaviors.jump import JUMP_PARAMETERS, StandingJump
-from controller_server.behaviors.observation import Observation
-from controller_server.behaviors.walk import WALK_PARAMETERS, Walk
+from controller_server.behaviors import Targets, behavior_parameters
 from controller_server.constraints import compute_support_equalities
 from controller_server.controllers.base import (
     CONTACT_PARAMETERS,
@@ -264,17 +262,7 @@ class PrioritizedController(Controller):
             doc="diagonal of S in eq. 15 per joint DoF, wire order; default all 0 (off)",
         ),
         "ankle_stiffness": ParamSpec(100.0, minimum=0.0, maximum=1e6, doc="k_p of `ankle` (1/s²)"),
-        "behavior": ParamSpec(
-            "balance",
-            kind="choice",
-            choices=("balance", "jump", "walk"),
-            doc="`jump`: one standing (or twisting) jump, de Lasa §5 (the `jump_` parameters); "
-            "set it again to jump again; `walk`: walking, de Lasa §6 with capture-point "
-            "footholds (the `walk_` parameters); `balance` stops a jump or a walk and "
-            "restores what it changed",
-        ),
-        **JUMP_PARAMETERS,
-        **WALK_PARAMETERS,
+        **behavior_parameters("prioritized"),
         "damping_ratio": ParamSpec(
             1.0, minimum=0.0, maximum=100.0, doc="ζ of every setpoint: k_v = 2 ζ √k_p (eq. 4)"
         ),
@@ -328,8 +316,7 @@ class PrioritizedController(Controller):
         self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._height_change_start_s: float | None = None  # state time a new height was set
         self._pending_height_change = False
-        self._jump: StandingJump | None = None
-        self._walk: Walk | None = None
+        self._height_changes_seen = 0  # the behaviour's requests of a new CM height so far
         super().__init__(robot, params)
 
     def default_value(self, key: str) -> Any:
@@ -343,31 +330,16 @@ class PrioritizedController(Controller):
         return super().default_value(key)
 
     def set_params(self, params: Mapping[str, Any]) -> None:
-        """Apply parameters; a new ``com_height`` starts a target objective (eq. 6–7).
-
-        ``behavior = "jump"`` (again) arms one jump from the next tick; ``"balance"``
-        stops a jump under way and puts back what it changed.
-        """
+        """Apply parameters; a new ``com_height`` starts a target objective (eq. 6–7)."""
         old_height = self._params.get("com_height")
         super().set_params(params)
         self._derived = {}
         if old_height is not None and self._params["com_height"] != old_height:
             self._pending_height_change = True
         if "behavior" in params:
-            jump, self._jump = self._jump, None
-            if jump is not None and jump.state != "done":
-                self._set_behavior_params(jump.saved)
-            walk, self._walk = self._walk, None
-            if walk is not None:
-                self._set_behavior_params(walk.saved)
+            self._height_changes_seen = 0
 
-    def _set_behavior_params(self, changes: Mapping[str, Any]) -> None:
-        """Set a behaviour's parameter changes (or put them back) as they are.
-
-        Unlike :meth:`set_params`, a ``behavior`` here ends nothing and a ``com_height``
-        starts no target objective (the jump starts its own).
-        """
-        super().set_params(changes)
+    def _overrides_changed(self) -> None:
         self._derived = {}
 
     def _validate(self, key: str, value: Any) -> Any:
@@ -401,11 +373,11 @@ class PrioritizedController(Controller):
     def _compute(self, control_input: ControlInput) -> ControlOutput:
         terms = compute_dynamics_terms(self.robot, self._data, control_input.q, control_input.v)
         check_finite_dynamics(terms)
-        if self._params["behavior"] == "jump":
-            self._step_jump(control_input, terms)
-        elif self._params["behavior"] == "walk":
-            self._step_walk(control_input, terms)
-        p = self._params
+        targets = self._host(control_input, terms, self._data)
+        if targets is not None and targets.com_height_changes != self._height_changes_seen:
+            self._height_changes_seen = targets.com_height_changes
+            self._pending_height_change = True
+        p = self.in_force()
         flags = self.supports(control_input)
         layout = PrioritizedLayout(
             self._index,
@@ -416,7 +388,7 @@ class PrioritizedController(Controller):
             p["ground_height"],
             p["contact_distance"],
         )
-        objectives, desired_rates = self._objectives(control_input, terms, layout)
+        objectives, desired_rates = self._objectives(control_input, terms, layout, targets)
         D, f = layout.inequalities(
             control_input.q, control_input.v, p["non_penetration"], p["joint_limit_horizon_s"]
         )
@@ -487,91 +459,11 @@ class PrioritizedController(Controller):
             control_input.want_diagnostics,
         )
 
-    def _step_jump(self, control_input: ControlInput, terms: DynamicsTerms) -> None:
-        """Advance the jump's state machine (§5) and apply what it sets at this tick."""
-        p = self._params
-        if self._jump is None:
-            self._jump = StandingJump(
-                p, control_input.q[7:], self.default_value("com_height"), self.robot.model
-            )
-        observation = self._observation(control_input, terms)
-        changes = self._jump.update(observation, p)
-        if changes:
-            self._set_behavior_params(changes)
-            if "com_height" in changes:
-                self._pending_height_change = True
-
-    def _observation(self, control_input: ControlInput, terms: DynamicsTerms) -> Observation:
-        """What a behaviour sees of this tick."""
-        return Observation(
-            time_s=control_input.time_s,
-            position_com_in_world=terms.position_com_in_world,
-            velocity_com_in_world=terms.momentum.linear_momentum / terms.total_mass,
-            touching=control_input.contact_flags,
-            position_contact_frames_in_world=terms.position_contact_frames_in_world,
-            joint_position=control_input.q[7:],
-            orientation_base_in_world_xyzw=control_input.q[3:7],
-            orientation_contact_frames_in_world=np.array(
-                [self._data.oMf[c.frame_id].rotation for c in self.robot.contacts]
-            ),
-            ground_height=self._params["ground_height"],
-        )
-
-    def _step_walk(self, control_input: ControlInput, terms: DynamicsTerms) -> None:
-        """Advance the walk's state machine (§6) and apply what it sets at this tick.
-
-        The walk asks `com` for a CM acceleration ``a``; eq. 4's setpoint asks
-        ``k_p (s + o − c) − k_v ċ`` of it (``s`` the centroid of the supports this tick,
-        ``o`` = ``com_offset_xy``), so ``o = c + (a + k_v ċ)/k_p − s`` (still limited to
-        what the supports can push, as any `com` request).
-        """
-        p = self._params
-        robot = self.robot
-        if self._walk is None:
-            self._walk = Walk(
-                p,
-                [np.asarray(c.points_in_frame) for c in robot.contacts],
-                control_input.q[7:],
-                _knee_bend_direction(robot),
-                _arm_dofs(robot),
-                self._gravity,
-                robot.model,
-            )
-        observation = self._observation(control_input, terms)
-        com, com_velocity = observation.position_com_in_world, observation.velocity_com_in_world
-        walk = self._walk
-        changes = walk.update(observation, p)
-        acceleration = walk.com_acceleration_xy
-        if acceleration is not None:
-            mask = changes.get("support_mask", p["support_mask"])
-            supports = [
-                points
-                for points, on, allowed in zip(
-                    terms.position_points_in_world, control_input.contact_flags, mask, strict=True
-                )
-                if on and allowed > 0.5
-            ]
-            stiffness = p["com_stiffness"]
-            if supports and stiffness > 0.0:
-                centroid = np.vstack(supports)[:, :2].mean(axis=0)
-                damping = critical_damping(stiffness, p["damping_ratio"])
-                offset = com[:2] + (acceleration + damping * com_velocity[:2]) / stiffness
-                changes["com_offset_xy"] = np.clip(offset - centroid, -10.0, 10.0).tolist()
-        if changes:
-            self._set_behavior_params(changes)
-
-    @property
-    def behavior_state(self) -> str:
-        """``balance``, or the jump's or walk's state (``stand``, ``compress`` … ``done``)."""
-        if self._walk is not None:
-            return self._walk.state
-        return "balance" if self._jump is None else self._jump.state
-
     def _planted(self) -> tuple[bool, ...]:
         """Per contact, whether ``support_mask`` allows it (until the parameters change)."""
         planted = self._derived.get("planted")
         if planted is None:
-            planted = tuple(bool(allowed > 0.5) for allowed in self._params["support_mask"])
+            planted = tuple(bool(allowed > 0.5) for allowed in self.in_force()["support_mask"])
             self._derived["planted"] = planted
         return planted
 
@@ -579,19 +471,24 @@ class PrioritizedController(Controller):
         """``friction_coefficients`` as a tuple (until the parameters change)."""
         mus = self._derived.get("friction")
         if mus is None:
-            mus = tuple(float(mu) for mu in self._params["friction_coefficients"])
+            mus = tuple(float(mu) for mu in self.in_force()["friction_coefficients"])
             self._derived["friction"] = mus
         return mus
 
     def _objectives(
-        self, control_input: ControlInput, terms: DynamicsTerms, layout: PrioritizedLayout
+        self,
+        control_input: ControlInput,
+        terms: DynamicsTerms,
+        layout: PrioritizedLayout,
+        targets: Targets | None,
     ) -> tuple[dict[str, _Term], dict[str, np.ndarray]]:
         """The objectives by name, each over its block of ``x``, and the desired momentum rates.
 
         The rates are for the diagnostics. Every objective on ``q̈`` comes from the feature library
-        (:mod:`controller_server.features`), over the layout's ``q̈`` block.
+        (:mod:`controller_server.features`), over the layout's ``q̈`` block. A behaviour's
+        ``targets`` give ``com`` a CM acceleration and ``swing`` and ``ankle`` their references.
         """
-        p, model = self._params, self.robot.model
+        p, model = self.in_force(), self.robot.model
         q, v = control_input.q, control_input.v
         momentum, mass = terms.momentum, terms.total_mass
         ratio = p["damping_ratio"]
@@ -616,14 +513,21 @@ class PrioritizedController(Controller):
         com_velocity = momentum.linear_momentum / mass
         desired_linear_rate = np.full(3, np.nan)
         if layout.support_positions.shape[0]:
-            reference_xy = layout.support_positions[:, :2].mean(axis=0) + p["com_offset_xy"]
+            centroid = layout.support_positions[:, :2].mean(axis=0)
             stiffness = p["com_stiffness"]
+            damping = critical_damping(stiffness, ratio)
+            offset = p["com_offset_xy"]
+            asked = None if targets is None else targets.com_acceleration_xy
+            if asked is not None and stiffness > 0.0:
+                # A behaviour's CM acceleration (a walk's pendulum): the offset whose eq. 4
+                # setpoint asks for it, within the offset's range (`com_offset_xy`).
+                offset = np.clip(
+                    com[:2] + (asked + damping * com_velocity[:2]) / stiffness - centroid,
+                    -10.0,
+                    10.0,
+                )
             desired_xy = setpoint_acceleration(
-                reference_xy,
-                com[:2],
-                com_velocity[:2],
-                stiffness,
-                critical_damping(stiffness, ratio),
+                centroid + offset, com[:2], com_velocity[:2], stiffness, damping
             )
             # Ask only what the ground can give without turning the body: the COP this
             # needs stays `cop_margin` inside the feet (as the weighted controller's L̇_des).
@@ -676,8 +580,8 @@ class PrioritizedController(Controller):
             p["weight_pose"],
         )
         on_acceleration += [pose, trunk]
-        jump = self._jump
-        if p["weight_ankle"] > 0 and jump is not None and jump.foot_rotations is not None:
+        feet = None if targets is None else targets.feet_from_com
+        if p["weight_ankle"] > 0 and feet is not None:
             stiffness = p["ankle_stiffness"]
             on_acceleration.append(
                 compute_point_from_com_objective(
@@ -688,23 +592,23 @@ class PrioritizedController(Controller):
                     momentum,
                     mass,
                     com,
-                    jump.ankle_offsets,
+                    feet.offsets_in_world,
                     stiffness,
                     critical_damping(stiffness, ratio),
                     p["weight_ankle"],
                     rotations=[self._data.oMf[c.frame_id].rotation for c in self.robot.contacts],
-                    reference_rotations=jump.foot_rotations,
+                    reference_rotations=feet.rotations_in_world,
                     angular_jacobians=[jacobian[3:] for jacobian in terms.support_jacobians],
                     angular_drifts=[drift[3:] for drift in terms.support_drifts],
                 )
             )
-        walk = self._walk
-        if p["weight_swing"] > 0 and walk is not None and walk.swing is not None:
-            foot = walk.swing.contact
-            stiffness = p["walk_swing_stiffness"]
+        swing = None if targets is None else targets.swing
+        if p["weight_swing"] > 0 and swing is not None:
+            foot = swing.contact
+            stiffness = swing.stiffness
             on_acceleration.append(
                 compute_swing_objective(
-                    walk.swing,
+                    swing,
                     control_input.time_s,
                     terms.support_jacobians[foot],
                     terms.support_drifts[foot],
@@ -749,7 +653,7 @@ class PrioritizedController(Controller):
         """``torque`` over the ``τ`` block (eq. 15), until the parameters change."""
         term = self._derived.get("torque")
         if term is None:
-            p = self._params
+            p = self.in_force()
             selection = np.asarray(p["torque_selection"], dtype=float)
             weight = float(p["weight_torque"])
             term = _Term(
@@ -765,7 +669,7 @@ class PrioritizedController(Controller):
         self, time_s: float, com: np.ndarray, com_velocity: np.ndarray
     ) -> float:
         """``z̈_d`` of `com_height`: target objective (eq. 6–7) while a change runs, else eq. 4."""
-        p = self._params
+        p = self.in_force()
         target = p["com_height"] + p["ground_height"]
         if self._pending_height_change:
             self._height_change_start_s = time_s
@@ -852,7 +756,7 @@ class PrioritizedController(Controller):
         torque_unclipped: np.ndarray,
     ) -> dict[str, Any]:
         """The tick's diagnostics (only on ticks that send them)."""
-        p, robot, x = self._params, self.robot, solution.x
+        p, robot, x = self.in_force(), self.robot, solution.x
         momentum = terms.momentum
         cop, cmp_ = ground_reference_points(
             terms.position_contact_frames_in_world,
@@ -902,34 +806,6 @@ class PrioritizedController(Controller):
                 "inequality_violation": solution.inequality_violation,
             },
         }
-
-
-def _knee_bend_direction(robot: RobotModel) -> np.ndarray:
-    """Per joint DoF: +1 on a knee's pitch (local y), −½ on a hip's or an ankle's, else 0."""
-    model = robot.model
-    direction = np.zeros(model.nv - NUM_ROOT_DOFS)
-    for joint_id in range(2, model.njoints):
-        name, joint = model.names[joint_id], model.joints[joint_id]
-        start = joint.idx_v - NUM_ROOT_DOFS
-        scale = 1.0 if "knee" in name else -0.5 if ("hip" in name or "ankle" in name) else 0.0
-        kind = joint.shortname()
-        if scale and kind == "JointModelSpherical":
-            direction[start + 1] = scale
-        elif scale and kind == "JointModelRY":
-            direction[start] = scale
-    return direction
-
-
-def _arm_dofs(robot: RobotModel) -> np.ndarray:
-    """Per joint DoF, whether it belongs to a shoulder or an elbow (E_arms of §6.2)."""
-    model = robot.model
-    arms = np.zeros(model.nv - NUM_ROOT_DOFS, dtype=bool)
-    for joint_id in range(2, model.njoints):
-        joint = model.joints[joint_id]
-        if any(word in model.names[joint_id] for word in ("shoulder", "elbow")):
-            start = joint.idx_v - NUM_ROOT_DOFS
-            arms[start : start + joint.nv] = True
-    return arms
 
 
 def _residual(term: _Term, x: np.ndarray) -> float:

@@ -63,6 +63,7 @@ class SwingTarget:
         start_s: When the swing began (s, client time).
         duration_s: ``T``, the swing's duration (s).
         landing_speed: Downward speed at ``T`` and after it (m/s).
+        stiffness: ``k_p`` of the foot's orientation and landing setpoints (1/s²).
     """
 
     contact: int
@@ -72,6 +73,7 @@ class SwingTarget:
     start_s: float
     duration_s: float
     landing_speed: float = 0.1
+    stiffness: float = 100.0
 
 
 def swing_acceleration(
