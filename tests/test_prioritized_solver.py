@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from controller_server.features import Objective
-from controller_server.solvers import prioritized
+from controller_server.solvers import level_svd, prioritized
 from controller_server.solvers.prioritized import (
     GRAM_CONDITION_LIMIT,
     Level,
@@ -396,7 +396,7 @@ def test_gram_svd_is_the_svd_of_a_well_conditioned_level(m, k):
     Within ε κ² (κ = 100): squaring the condition is what the Gram matrix costs."""
     rng = np.random.default_rng(m * k)
     A = well_conditioned(rng, m, k, 100.0)
-    decomposition = (prioritized._gram_svd if m <= k else prioritized._gram_svd_tall)(A)
+    decomposition = (level_svd.gram_svd if m <= k else level_svd.gram_svd_tall)(A)
     assert decomposition is not None
     U, sigma, V = decomposition
     np.testing.assert_allclose(sigma, np.linalg.svd(A, compute_uv=False), rtol=1e-11)
@@ -410,15 +410,15 @@ def test_gram_svd_is_the_svd_of_a_well_conditioned_level(m, k):
 def test_gram_svd_declines_an_ill_conditioned_level():
     rng = np.random.default_rng(4)
     A = well_conditioned(rng, 10, 25, 10 * GRAM_CONDITION_LIMIT)
-    assert prioritized._gram_svd(A) is None
-    assert prioritized._gram_svd_tall(A.T) is None
+    assert level_svd.gram_svd(A) is None
+    assert level_svd.gram_svd_tall(A.T) is None
 
 
 @pytest.mark.parametrize(("k", "m"), [(104, 59), (20, 6), (7, 6), (5, 1)])
 def test_orthogonal_complement_completes_an_orthonormal_basis(k, m):
     rng = np.random.default_rng(k + m)
     V, _ = np.linalg.qr(rng.normal(size=(k, m)))
-    complement = prioritized._orthogonal_complement(V)
+    complement = level_svd.orthogonal_complement(V)
     basis = np.hstack([V, complement])
     np.testing.assert_allclose(basis.T @ basis, np.eye(k), atol=1e-14)
 
@@ -479,13 +479,13 @@ def test_a_null_space_part_the_levels_below_cannot_see_changes_nothing(seed, mon
     forces = np.hstack([np.zeros((nl, nu + nv)), np.eye(nl)])
     D, f = forces.copy(), np.zeros(nl)  # λ ≥ 0
     gram_results = []
-    real_gram_svd = prioritized._gram_svd
+    real_gram_svd = prioritized.gram_svd
 
     def spy(*args):
         gram_results.append(real_gram_svd(*args))
         return gram_results[-1]
 
-    monkeypatch.setattr(prioritized, "_gram_svd", spy)
+    monkeypatch.setattr(prioritized, "gram_svd", spy)
 
     def solve(part):
         levels = [
@@ -560,7 +560,7 @@ def test_invalid_input_is_refused_with_context():
 
 def test_a_qp_failure_below_the_top_level_skips_only_that_level(monkeypatch):
     """Below a solved level w = 0 is feasible: a failing QP solver is not infeasibility."""
-    monkeypatch.setattr(prioritized, "_solve_qp", lambda *args, **kwargs: None)
+    monkeypatch.setattr(prioritized, "solve_qp_chain", lambda *args, **kwargs: None)
     levels = [
         [Objective("first", np.array([[1.0, 0.0, 0.0]]), np.array([1.0]), np.ones(1))],
         [Objective("needs a QP", np.array([[0.0, 1.0, 0.0]]), np.array([5.0]), np.ones(1))],

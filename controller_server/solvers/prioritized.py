@@ -72,7 +72,7 @@ failure.
 The QP is ill-conditioned by design (curvature ratio up to
 ``(2 B σ_max)² ≈ 10¹⁶``) and lower levels often sit at degenerate vertices
 (more active inequalities than unknowns left), so each solver gets settings
-of its own (``_BACKENDS``). quadprog alone needs regularization: the
+of its own (:data:`~.qp.QP_BACKENDS`). quadprog alone needs regularization: the
 curvature of the directions passed down is floored at ``10⁻¹² σ_max²``, and
 the inequalities are relaxed by 1 % of the feasibility tolerance. The
 floor makes a level a little less willing to move those directions to meet
@@ -141,17 +141,28 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Literal
+from typing import Any
 
-import eigenpy
 import numpy as np
 import qpsolvers
-from qpsolvers.exceptions import QPError
 from scipy.linalg import lapack as _lapack
 
 from controller_server.features.objective import Objective
 from controller_server.math.damped import damping_for_gain_bound
-from controller_server.solvers.qp import solve_qp_bounded
+from controller_server.solvers.level_svd import (
+    GRAM_CONDITION_LIMIT,
+    GRAM_MIN_COLUMNS,
+    gram_svd,
+    gram_svd_tall,
+)
+from controller_server.solvers.levels import (
+    Level,
+    LevelReport,
+    PrioritizedSolution,
+    stack_level,
+)
+from controller_server.solvers.qp import QPClock, solve_qp_chain
+from controller_server.solvers.seen_blocks import SeenBlocks
 
 __all__ = [
     "GRAM_CONDITION_LIMIT",
@@ -162,8 +173,6 @@ __all__ = [
     "qp_data_limit",
     "solve_prioritized",
 ]
-
-LevelStatus = Literal["solved", "infeasible", "solver failed", "not reached", "empty"]
 
 QP_TIME_BUDGET_S = 0.02
 """Wall time (s) of the QP solves of one :func:`solve_prioritized` call after which no QP is
@@ -176,167 +185,13 @@ slow machine loses only second tries, and the top level keeps its rescue by anot
 at most about this budget plus one capped call per level and solver. With daqp, ticks near
 standing spend under 1 ms in QPs."""
 
-GRAM_CONDITION_LIMIT = 1e3
-"""Largest condition number of a level flagged well conditioned (:attr:`Level.well_conditioned`)
-whose SVD comes from the eigendecomposition of ``Ā Āᵀ`` (:func:`_gram_svd`)."""
-
-_GRAM_MIN_COLUMNS = 8
-"""Tall levels with fewer columns take the SVD: it costs little more than the Gram matrix."""
 _EPSILON = float(np.finfo(float).eps)
 _TINY = float(np.finfo(float).tiny)
-_FALLBACK_ORDER = ("daqp", "quadprog", "proxqp")
-"""Solvers tried, in this order, after the chosen one fails on a QP."""
 _NULL_CURVATURES = (1e-6, 1e-4)
 """QP curvature of the directions without gain (σ = 0 or at the rounding floor), relative to
 σ_max, tried in turn: strictly convex yet small against every kept direction (σ ≥ 1/B), so
 that an active inequality is met by moving along the null space rather than by giving up this
 level's residual; the larger one only when the solvers fail on the worse-conditioned QP."""
-
-
-@dataclass(frozen=True)
-class _Backend:
-    """How one QP solver is called (values measured on random stacks, see the module docstring).
-
-    Attributes:
-        settings: Solver options; tolerances well below the feasibility tolerance (1e-7) the
-            result is checked against.
-        retry: Options changed for a second attempt after a failure.
-        curvature_floor: Floor on the curvature of the directions passed down, relative to
-            the largest curvature.
-        bound_relaxation: Inequalities relaxed by this fraction of the feasibility tolerance.
-    """
-
-    settings: dict[str, float | bool]
-    retry: dict[str, float] | None = None
-    curvature_floor: float = 0.0
-    bound_relaxation: float = 0.0
-
-
-_BACKENDS: dict[str, _Backend] = {
-    # Default primal tolerance 1e-6. Automatic proximal-point iterations (on Hessians daqp finds
-    # singular) stop at eta_prox = 1e-6 by default, leaving top-level residuals ~1e-8, and at
-    # 1e-12 sometimes hit the iteration limit. Hessians it finds regular but spanning ≳ 1e10
-    # (small σ_max next to 1/(4B²)) can make it report a feasible level infeasible: forced
-    # proximal iterations solve those, but are slow on large levels, hence only on retry.
-    "daqp": _Backend({"primal_tol": 1e-9, "eta_prox": 1e-10}, retry={"eps_prox": 1e-6}),
-    # Goldfarb–Idnani, built on the inverse Cholesky factor: violated active inequalities by
-    # ~1e-6 at curvature ratios (2 B σ_max)² ≈ 1e16, and fails at degenerate vertices unless
-    # they are perturbed into small polytopes.
-    "quadprog": _Backend({}, curvature_floor=1e-12, bound_relaxation=1e-2),
-    # Default eps_abs 1e-5. Declares degenerate feasible levels infeasible; asked for the closest
-    # feasible point instead, it returns the optimum there (checked by _solve_level), but in that
-    # mode once stopped early (objective 2e-5 off) unless the duality gap is checked too. The
-    # iteration caps (QP_ITERATION_LIMITS) make a truly infeasible level cost ~10 ms (both
-    # attempts) instead of ~1 s.
-    "proxqp": _Backend(
-        {
-            "eps_abs": 1e-9,
-            "eps_rel": 0.0,
-            "primal_infeasibility_solving": True,
-            "check_duality_gap": True,
-        },
-        retry={"eps_abs": 1e-8},
-    ),
-}
-
-
-_DEFAULT_BACKEND = _Backend({})
-
-
-@dataclass(frozen=True)
-class Level:
-    """One priority level as stacked rows ``√w A`` and ``√w b`` (de Lasa 2010, eq. 37).
-
-    What :func:`solve_prioritized` makes of a sequence of :class:`Objective` s; a caller
-    that has the rows already (the prioritized controller) passes them as they are.
-
-    Attributes:
-        names: Names of the level's objectives (for the report).
-        A: ``(m, n)`` rows, each already scaled by the square root of its weight.
-        b: ``(m,)`` right-hand side, scaled alike.
-        well_conditioned: The caller knows the rows to be linearly independent and well
-            conditioned (the equations of motion: ``M ≻ 0``). The level's SVD may then come
-            from the eigendecomposition of ``Ā Āᵀ`` (see :func:`_gram_svd`); the solver checks
-            the condition and falls back to the SVD of ``Ā`` when it is not small.
-        null_space_part: ``(n, f)`` orthonormal columns in the null space of ``A``, for a
-            ``well_conditioned`` first level: kept as a block of ``C̄`` of its own (see the
-            module docstring, "Blocks"), so that the levels below whose rows are exactly
-            zero on it leave it out of their SVD. Ignored when the level's SVD is taken.
-        row_basis: ``(m, r)`` orthonormal columns whose span holds every column of ``A``
-            (rows that combine fewer: the points of a rigid sole). The level is solved as
-            ``Pᵀ A x ≈ Pᵀ b``, which has the same minimizers, singular values and right
-            singular vectors, from ``r`` rows (by :func:`_gram_svd` when its condition
-            allows); its rounding floor and reported residual are those of all ``m`` rows.
-    """
-
-    names: tuple[str, ...]
-    A: np.ndarray
-    b: np.ndarray
-    well_conditioned: bool = False
-    null_space_part: np.ndarray | None = None
-    row_basis: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class LevelReport:
-    """What happened at one priority level.
-
-    Attributes:
-        names: Names of the level's objectives.
-        status: ``"solved"``; ``"infeasible"`` (the QP had no solution: ``x`` is the
-            solution of the levels above); ``"solver failed"`` (below a solved level, where
-            ``w = 0`` is feasible, so the QP solver failed: the level is skipped, its
-            freedom left to the levels below); ``"not reached"`` (after a level that used
-            all remaining freedom, or after an infeasible level); ``"empty"`` (no
-            objectives).
-        residual: ``‖W^{½}(A x − b)‖`` at the returned ``x``.
-        rank: Number of directions of ``Ā = A C̄`` kept by this level (σ ≥ tolerance);
-            0 when not solved.
-        null_space_dimension: Dimension of the freedom left to the lower levels after this
-            level (columns of ``C̄``); 0 when not solved.
-        damping: Largest λᵢ applied, ``damping_for_gain_bound(σ, B)`` for the smallest
-            singular value σ above the rounding floor; 0 when no direction was damped.
-        singular_value_tolerance: ``max(1/B, σ_max · max(m, k) · ε)``; 0 when not solved.
-        used_qp: Whether the level needed a QP (the closed form violated an inequality).
-        detail: Why the level's QP gave no solution (``""`` if it did, or needed none):
-            every solver failed, the time budget was spent, or the data were out of range.
-    """
-
-    names: tuple[str, ...]
-    status: LevelStatus
-    residual: float
-    rank: int
-    null_space_dimension: int
-    damping: float
-    singular_value_tolerance: float
-    used_qp: bool
-    detail: str = ""
-
-
-@dataclass(frozen=True)
-class PrioritizedSolution:
-    """Result of :func:`solve_prioritized`.
-
-    Attributes:
-        found: No level was infeasible or failed, and ``D x + f ≥ 0`` holds within the
-            tolerance.
-        x: The solution (``d̄`` of Algorithm 1 where the solver stopped).
-        levels: One report per level, in priority order.
-        inequality_violation: ``max(0, max(−(D x + f)))``.
-        qp_solver: Name of the QP solver used for constrained levels.
-        solve_time_s: Wall time of the solve (s).
-        qp_attempts: Number of QP solver calls (every solver, retry and level).
-        qp_time_s: Wall time of those calls (s).
-    """
-
-    found: bool
-    x: np.ndarray
-    levels: tuple[LevelReport, ...]
-    inequality_violation: float
-    qp_solver: str
-    solve_time_s: float
-    qp_attempts: int = 0
-    qp_time_s: float = 0.0
 
 
 def solve_prioritized(
@@ -401,14 +256,14 @@ def solve_prioritized(
             f"inequalities D x + f ≥ 0 need D (p, n) and f (p,), got {D.shape=}, {f.shape=}"
         )
     n = D.shape[1]
-    stacked = [_stack_level(level, n, check_finite) for level in levels]
+    stacked = [stack_level(level, n, check_finite) for level in levels]
 
     # C̄ as orthonormal blocks (basis, D basis); None stands for I (saves an n × n product).
     blocks: list[tuple[np.ndarray, np.ndarray]] | None = None
     d_bar: np.ndarray | None = None  # None stands for 0
     slack = f.copy()  # D d̄ + f, kept up to date with d̄
     reports: list[LevelReport] = []
-    clock = _QPClock(qp_time_budget_s)
+    clock = QPClock(qp_time_budget_s)
     stopped = infeasible = failed = solved_any = False
     for level_index, level in enumerate(stacked):
         names, A, b = level.names, level.A, level.b
@@ -421,7 +276,7 @@ def solve_prioritized(
         if A.shape[0] == 0:
             reports.append(LevelReport(names, "empty", 0.0, 0, dimension, 0.0, 0.0, False))
             continue
-        seen = _Seen.of(A, D, blocks)  # Algorithm 1, line 3: Ā = A C̄, block by block
+        seen = SeenBlocks.of(A, D, blocks)  # Algorithm 1, line 3: Ā = A C̄, block by block
         b_bar = b if d_bar is None else b - A @ d_bar  # line 4
         step = _solve_level(
             seen,
@@ -521,98 +376,6 @@ def qp_data_limit(feasibility_tolerance: float) -> float:
     return feasibility_tolerance / float(np.finfo(float).eps)
 
 
-@dataclass
-class _QPClock:
-    """The QP solves of one :func:`solve_prioritized` call, against its time budget."""
-
-    budget_s: float
-    attempts: int = 0
-    spent_s: float = 0.0
-    refusals: int = 0
-
-    def allows(self, fallback: bool) -> bool:
-        """Whether a QP may start: a solver's first attempt always, a fallback within budget."""
-        allowed = not fallback or self.spent_s < self.budget_s
-        self.refusals += not allowed
-        return allowed
-
-
-@dataclass(frozen=True)
-class _Seen:
-    """One level's view of ``C̄`` (module docstring, "Blocks").
-
-    Attributes:
-        A_bar: ``Ā = A C̄`` on the blocks the level sees, ``(m, k)``.
-        D_seen: ``D C̄`` on those blocks, ``(p, k)``.
-        D_unseen: ``D C̄`` on the blocks on which ``A`` is exactly zero, ``(p, k_u)``.
-        seen: The seen blocks' bases side by side, ``(n, k)`` (``None``: ``C̄ = I``).
-        unseen: The unseen blocks, ``(basis, D basis)``.
-    """
-
-    A_bar: np.ndarray
-    D_seen: np.ndarray
-    D_unseen: np.ndarray
-    seen: np.ndarray | None
-    unseen: list[tuple[np.ndarray, np.ndarray]]
-
-    @staticmethod
-    def of(
-        A: np.ndarray, D: np.ndarray, blocks: list[tuple[np.ndarray, np.ndarray]] | None
-    ) -> _Seen:
-        """Split ``C̄``'s blocks into those ``A`` sees and those it is exactly zero on."""
-        if blocks is None:
-            return _Seen(A, D, D[:, :0], None, [])
-        seen: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        unseen: list[tuple[np.ndarray, np.ndarray]] = []
-        for basis, D_basis in blocks:
-            product = A @ basis
-            if product.any():
-                seen.append((basis, D_basis, product))
-            else:
-                unseen.append((basis, D_basis))
-        if len(unseen) > 1:
-            D_unseen = np.hstack([D_basis for _, D_basis in unseen])
-        else:
-            D_unseen = unseen[0][1] if unseen else D[:, :0]
-        if len(seen) == 1:
-            basis, D_basis, product = seen[0]
-            return _Seen(product, D_basis, D_unseen, basis, unseen)
-        if not seen:
-            return _Seen(A[:, :0], D[:, :0], D_unseen, np.zeros((A.shape[1], 0)), unseen)
-        return _Seen(
-            np.hstack([product for _, _, product in seen]),
-            np.hstack([D_basis for _, D_basis, _ in seen]),
-            D_unseen,
-            np.hstack([basis for basis, _, _ in seen]),
-            unseen,
-        )
-
-    def to_x(self, w: np.ndarray, w_unseen: np.ndarray | None) -> np.ndarray:
-        """A step in ``x`` from its coordinates on the seen and the unseen blocks."""
-        move = w if self.seen is None else self.seen @ w
-        if w_unseen is not None:
-            start = 0
-            for basis, _ in self.unseen:
-                end = start + basis.shape[1]
-                move = move + basis @ w_unseen[start:end]
-                start = end
-        return move
-
-    def null_blocks(
-        self, null_parts: list[tuple[np.ndarray, np.ndarray | None]]
-    ) -> list[tuple[np.ndarray, np.ndarray]]:
-        """``C̄ null(Ā)`` as blocks: the level's null space in the seen part, then the unseen."""
-        blocks = [
-            (
-                part if self.seen is None else self.seen @ part,
-                self.D_seen @ part if D_part is None else D_part,
-            )
-            for part, D_part in null_parts
-            if part.shape[1]
-        ]
-        return blocks + self.unseen
-
-
 @dataclass(frozen=True)
 class _LevelStep:
     """One level's step (``w`` is ``None`` if infeasible) and what Algorithm 1 needs next.
@@ -642,7 +405,7 @@ class _LevelStep:
 
 
 def _solve_level(
-    seen: _Seen,
+    seen: SeenBlocks,
     b_bar: np.ndarray,
     slack: np.ndarray,
     dimension: int,
@@ -650,7 +413,7 @@ def _solve_level(
     qp_solver: str,
     feasibility_tolerance: float,
     persist: bool,
-    clock: _QPClock,
+    clock: QPClock,
     gram: bool = False,
     null_space_part: np.ndarray | None = None,
     rows: int | None = None,
@@ -660,8 +423,8 @@ def _solve_level(
     ``Ā`` is the level on the blocks of ``C̄`` it sees (``dimension`` counts all of ``C̄``):
     on the others it is exactly zero, like the directions without a singular value. With
     ``gram`` (a level known to be well conditioned), the SVD of a wide ``Ā`` comes from
-    :func:`_gram_svd` when its condition allows, and ``null_space_part`` becomes a null
-    part of its own; a tall ``Ā`` tries :func:`_gram_svd_tall` first. ``rows`` counts the
+    :func:`~.level_svd.gram_svd` when its condition allows, and ``null_space_part`` becomes a null
+    part of its own; a tall ``Ā`` tries :func:`~.level_svd.gram_svd_tall` first. ``rows`` counts the
     level's rows before a :attr:`Level.row_basis` reduced them (the rounding floor is the
     SVD's of all of them).
     """
@@ -669,9 +432,9 @@ def _solve_level(
     m, k = A_bar.shape
     decomposition = None
     if gram and 0 < m <= k:
-        decomposition = _gram_svd(A_bar, null_space_part)
-    elif m >= k >= _GRAM_MIN_COLUMNS:
-        decomposition = _gram_svd_tall(A_bar)
+        decomposition = gram_svd(A_bar, null_space_part)
+    elif m >= k >= GRAM_MIN_COLUMNS:
+        decomposition = gram_svd_tall(A_bar)
     given = 0
     if decomposition is not None:
         U, sigma, V = decomposition
@@ -733,7 +496,7 @@ def _solve_level(
             curvatures = _NULL_CURVATURES if persist else _NULL_CURVATURES[:1]
             for index, null_curvature in enumerate(curvatures):
                 curvature[used:] = max((null_curvature * sigma_max) ** 2, _TINY)
-                z_qp = _solve_qp(
+                z_qp = solve_qp_chain(
                     curvature,
                     linear,
                     D_C_bar_V,
@@ -770,17 +533,6 @@ def _solve_level(
     return _LevelStep(w, w_unseen, slack, null_parts, rank, damping, tolerance, used_qp)
 
 
-def _symmetric_eigen(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eigenvalues (ascending) and eigenvectors of a symmetric ``G``.
-
-    Eigen's ``SelfAdjointEigenSolver`` (through eigenpy, which Pinocchio's bindings are built
-    on): 1.5–2× faster than LAPACK's ``syevd`` at the sizes of the levels (15–45), as
-    backward stable.
-    """
-    solver = eigenpy.SelfAdjointEigenSolver(G)
-    return solver.eigenvalues(), solver.eigenvectors()
-
-
 def _norm(vector: np.ndarray) -> float:
     """Euclidean norm of a finite vector (``np.linalg.norm`` without its dispatch)."""
     return math.sqrt(float(vector @ vector))
@@ -792,184 +544,3 @@ def _prefix(values: list[float], holds: Any) -> int:
     while count and not holds(values[count - 1]):
         count -= 1
     return count
-
-
-def _gram_svd(
-    A: np.ndarray, null_space_part: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """``U``, ``σ`` (descending) and ``V`` (``k × k``) of a wide ``A`` from ``eigh(A Aᵀ)``.
-
-    ``A Aᵀ = U Σ² Uᵀ``, ``V[:, :m] = Aᵀ U Σ⁻¹`` and the rest of ``V`` any orthonormal basis
-    of ``null(A)``: the directions without a singular value all get the same QP curvature,
-    so which basis does not matter. It is the complement (:func:`_orthogonal_complement`)
-    of ``V[:, :m]`` and ``null_space_part`` (orthonormal columns in ``null(A)``), then
-    ``null_space_part`` itself, last. Squaring loses ``ε κ²`` relative in ``σ_min`` (κ the
-    condition number); ``None`` unless ``κ ≤`` :data:`GRAM_CONDITION_LIMIT` (then ≲ 1e-10,
-    and ≈ 2e-12 for the equations of motion of the built-in models, κ ≈ 100): the caller
-    takes the SVD of ``A`` instead. The ``m × m`` eigendecomposition costs about a third of
-    the ``m × k`` SVD.
-    """
-    m, k = A.shape
-    eigenvalues, eigenvectors = _symmetric_eigen(A @ A.T)
-    if not eigenvalues[0] >= eigenvalues[-1] / GRAM_CONDITION_LIMIT**2:  # also NaN
-        return None
-    sigma = np.sqrt(eigenvalues[::-1])
-    U = np.ascontiguousarray(eigenvectors[:, ::-1])  # descending; BLAS needs positive strides
-    V = np.empty((k, k))
-    V[:, :m] = (A.T @ U) / sigma
-    given = 0 if null_space_part is None else null_space_part.shape[1]
-    if given:
-        V[:, k - given :] = null_space_part
-    if m + given < k:
-        known = V[:, :m] if not given else np.hstack([V[:, :m], V[:, k - given :]])
-        V[:, m : k - given] = _orthogonal_complement(known)
-    return U, sigma, V
-
-
-def _gram_svd_tall(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Thin ``U``, ``σ`` (descending) and ``V`` of a tall ``A`` from ``eigh(Aᵀ A)``.
-
-    ``Aᵀ A = V Σ² Vᵀ``, ``U = A V Σ⁻¹``; ``None`` unless the condition number is at most
-    :data:`GRAM_CONDITION_LIMIT` (see :func:`_gram_svd`): then no singular value is at the
-    rounding floor, and none is within ``ε κ²`` (relative) of any other threshold but by
-    a coincidence the damping's continuity at ``1/B`` makes harmless.
-    """
-    eigenvalues, eigenvectors = _symmetric_eigen(A.T @ A)
-    if not eigenvalues[0] >= eigenvalues[-1] / GRAM_CONDITION_LIMIT**2:  # also NaN
-        return None
-    sigma = np.sqrt(eigenvalues[::-1])
-    V = np.ascontiguousarray(eigenvectors[:, ::-1])  # descending; BLAS needs positive strides
-    return (A @ V) / sigma, sigma, V
-
-
-def _orthogonal_complement(V: np.ndarray) -> np.ndarray:
-    """An orthonormal basis ``(k, k − m)`` of the complement of ``V``'s orthonormal columns.
-
-    The last columns of ``Q`` in the Householder QR of ``V`` (LAPACK ``geqrf``, then ``ormqr``
-    applied to ``[0; I]``), without forming all of ``Q``.
-    """
-    k, m = V.shape
-    factors, tau, _, _ = _lapack.dgeqrf(V)
-    identity = np.zeros((k, k - m), order="F")
-    identity[m:] = np.eye(k - m)
-    complement, _, _ = _lapack.dormqr("L", "N", factors, tau, identity, lwork=64 * k)
-    return complement
-
-
-def _solve_qp(
-    curvature: np.ndarray,
-    linear: np.ndarray,
-    D_C_bar_V: np.ndarray,
-    bound: np.ndarray,
-    qp_solver: str,
-    rank: int,
-    feasibility_tolerance: float,
-    fallbacks: bool,
-    clock: _QPClock,
-    first: bool,
-) -> np.ndarray | None:
-    """``min ½ Σ hᵢ zᵢ² − Σ lᵢ zᵢ  s.t.  D C̄ V z + bound ≥ 0`` (eq. 35 in ``z = Vᵀ w``).
-
-    The chosen solver first (with its retry settings), then, with
-    ``fallbacks``, the other tested solvers: an active-set solver stalling on a
-    degenerate vertex does not make the problem infeasible. Each call is capped in
-    iterations (:func:`~.qp.solve_qp_bounded`). With ``first`` (the level's first curvature) each
-    solver's first settings always run; retry settings, and every attempt without
-    ``first``, only while ``clock``'s budget lasts.
-    """
-    names = [qp_solver]
-    if fallbacks:
-        names += [
-            name
-            for name in _FALLBACK_ORDER
-            if name != qp_solver and name in qpsolvers.available_solvers
-        ]
-    gradient = np.zeros(curvature.size)
-    np.negative(linear, out=gradient[: linear.size])
-    G = -D_C_bar_V
-    for name in names:
-        backend = _BACKENDS.get(name, _DEFAULT_BACKEND)
-        problem_curvature = curvature
-        if backend.curvature_floor:  # only in the directions passed down, never the kept ones
-            problem_curvature = curvature.copy()
-            floor = backend.curvature_floor * curvature.max()
-            np.maximum(problem_curvature[rank:], floor, out=problem_curvature[rank:])
-        relaxed = bound
-        if backend.bound_relaxation:
-            relaxed = bound + backend.bound_relaxation * feasibility_tolerance
-        problem = qpsolvers.Problem(np.diag(problem_curvature), gradient, G, relaxed)
-        attempts = [backend.settings]
-        if backend.retry is not None:
-            attempts.append({**backend.settings, **backend.retry})
-        for retry, settings in enumerate(attempts):
-            # Past the budget every solver of the chain is still tried once, but nothing
-            # twice: no retry settings, no second curvature.
-            if not clock.allows(fallback=retry > 0 or not first):
-                break
-            start = time.perf_counter()
-            try:
-                solution = solve_qp_bounded(problem, name, **settings)
-            except (QPError, ValueError, np.linalg.LinAlgError):
-                continue
-            finally:
-                clock.attempts += 1
-                clock.spent_s += time.perf_counter() - start
-            info = solution.extras.get("info") if isinstance(solution.extras, dict) else None
-            closest = info is not None and str(info.status).endswith("CLOSEST_PRIMAL_FEASIBLE")
-            z = solution.x
-            if (solution.found or closest) and z is not None and np.isfinite(z).all():
-                return z
-    return None
-
-
-def _stack_level(
-    level: Level | Sequence[Objective] | Objective, n: int, check_finite: bool = True
-) -> Level:
-    """The level's rows ``√w A``, ``√w b`` (de Lasa 2010, eq. 37), checked."""
-    if isinstance(level, Level):
-        A, b = level.A, level.b
-        if not (isinstance(A, np.ndarray) and A.dtype == float):
-            A = np.asarray(A, dtype=float)
-        if not (isinstance(b, np.ndarray) and b.dtype == float):
-            b = np.asarray(b, dtype=float)
-        if A.ndim != 2 or A.shape[1] != n or b.shape != (A.shape[0],):
-            raise ValueError(
-                f"level {level.names} needs A (m, {n}) and b (m,), got {A.shape=}, {b.shape=}"
-            )
-        if check_finite and not (np.isfinite(A).all() and np.isfinite(b).all()):
-            raise ValueError(f"level {level.names} has non-finite A or b")
-        basis = level.row_basis
-        if basis is not None and (basis.ndim != 2 or basis.shape[0] != A.shape[0]):
-            raise ValueError(
-                f"level {level.names} needs a row basis ({A.shape[0]}, r), got {basis.shape}"
-            )
-        return level if A is level.A and b is level.b else replace(level, A=A, b=b)
-    objectives = (level,) if isinstance(level, Objective) else tuple(level)
-    names = tuple(objective.name for objective in objectives)
-    blocks_A: list[np.ndarray] = []
-    blocks_b: list[np.ndarray] = []
-    for objective in objectives:
-        A = np.asarray(objective.A, dtype=float)
-        b = np.asarray(objective.b, dtype=float)
-        if A.ndim != 2 or A.shape[1] != n or b.shape != (A.shape[0],):
-            raise ValueError(
-                f"objective {objective.name!r} needs A (m, {n}) and b (m,), "
-                f"got {A.shape=}, {b.shape=}"
-            )
-        weight = np.asarray(objective.weight, dtype=float)
-        if weight.shape not in ((), b.shape):
-            raise ValueError(
-                f"objective {objective.name!r} needs weights () or {b.shape}, got {weight.shape}"
-            )
-        if not (np.all(np.isfinite(weight)) and np.all(weight >= 0.0)):
-            raise ValueError(f"objective {objective.name!r} has weights {weight} (need ≥ 0)")
-        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):
-            raise ValueError(f"objective {objective.name!r} has non-finite A or b")
-        root_weight = np.broadcast_to(np.sqrt(weight), b.shape)
-        blocks_A.append(root_weight[:, None] * A)
-        blocks_b.append(root_weight * b)
-    if not blocks_A:
-        return Level(names, np.zeros((0, n)), np.zeros(0))
-    if len(blocks_A) == 1:
-        return Level(names, blocks_A[0], blocks_b[0])
-    return Level(names, np.vstack(blocks_A), np.concatenate(blocks_b))

@@ -12,12 +12,14 @@ no inner-iteration cap.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import qpsolvers
 import scipy.sparse
 from qpsolvers.conversions import combine_linear_box_inequalities
+from qpsolvers.exceptions import QPError
 
 try:
     from proxsuite import proxqp
@@ -28,7 +30,15 @@ try:
 except ImportError:  # optional backend: qpsolvers then reports it as not installed
     _daqp_solve = None
 
-__all__ = ["QP_ITERATION_LIMITS", "solve_qp_bounded"]
+__all__ = [
+    "FALLBACK_ORDER",
+    "QP_BACKENDS",
+    "QP_ITERATION_LIMITS",
+    "QPBackend",
+    "QPClock",
+    "solve_qp_bounded",
+    "solve_qp_chain",
+]
 
 QP_ITERATION_LIMITS: dict[str, dict[str, int]] = {
     # Active-set iterations; at most 77 on seeded near-standing states of the built-in models
@@ -164,3 +174,141 @@ def _solve_daqp(
     solution.build_time = solve_start - build_start
     solution.solve_time = solve_end - solve_start
     return solution
+
+
+# The chain of solvers a prioritized level tries ---------------------------------------------
+
+FALLBACK_ORDER = ("daqp", "quadprog", "proxqp")
+"""Solvers tried, in this order, after the chosen one fails on a QP."""
+
+
+@dataclass(frozen=True)
+class QPBackend:
+    """How one QP solver is called (values measured on random prioritized stacks).
+
+    Attributes:
+        settings: Solver options; tolerances well below the feasibility tolerance (1e-7) the
+            result is checked against.
+        retry: Options changed for a second attempt after a failure.
+        curvature_floor: Floor on the curvature of the directions passed down, relative to
+            the largest curvature.
+        bound_relaxation: Inequalities relaxed by this fraction of the feasibility tolerance.
+    """
+
+    settings: dict[str, float | bool]
+    retry: dict[str, float] | None = None
+    curvature_floor: float = 0.0
+    bound_relaxation: float = 0.0
+
+
+QP_BACKENDS: dict[str, QPBackend] = {
+    # Default primal tolerance 1e-6. Automatic proximal-point iterations (on Hessians daqp finds
+    # singular) stop at eta_prox = 1e-6 by default, leaving top-level residuals ~1e-8, and at
+    # 1e-12 sometimes hit the iteration limit. Hessians it finds regular but spanning ≳ 1e10
+    # (small σ_max next to 1/(4B²)) can make it report a feasible level infeasible: forced
+    # proximal iterations solve those, but are slow on large levels, hence only on retry.
+    "daqp": QPBackend({"primal_tol": 1e-9, "eta_prox": 1e-10}, retry={"eps_prox": 1e-6}),
+    # Goldfarb–Idnani, built on the inverse Cholesky factor: violated active inequalities by
+    # ~1e-6 at curvature ratios (2 B σ_max)² ≈ 1e16, and fails at degenerate vertices unless
+    # they are perturbed into small polytopes.
+    "quadprog": QPBackend({}, curvature_floor=1e-12, bound_relaxation=1e-2),
+    # Default eps_abs 1e-5. Declares degenerate feasible levels infeasible; asked for the closest
+    # feasible point instead, it returns the optimum there (checked by _solve_level), but in that
+    # mode once stopped early (objective 2e-5 off) unless the duality gap is checked too. The
+    # iteration caps (QP_ITERATION_LIMITS) make a truly infeasible level cost ~10 ms (both
+    # attempts) instead of ~1 s.
+    "proxqp": QPBackend(
+        {
+            "eps_abs": 1e-9,
+            "eps_rel": 0.0,
+            "primal_infeasibility_solving": True,
+            "check_duality_gap": True,
+        },
+        retry={"eps_abs": 1e-8},
+    ),
+}
+
+
+_DEFAULT_BACKEND = QPBackend({})
+
+
+@dataclass
+class QPClock:
+    """The QP solves of one prioritized solve, against its time budget."""
+
+    budget_s: float
+    attempts: int = 0
+    spent_s: float = 0.0
+    refusals: int = 0
+
+    def allows(self, fallback: bool) -> bool:
+        """Whether a QP may start: a solver's first attempt always, a fallback within budget."""
+        allowed = not fallback or self.spent_s < self.budget_s
+        self.refusals += not allowed
+        return allowed
+
+
+def solve_qp_chain(
+    curvature: np.ndarray,
+    linear: np.ndarray,
+    D_C_bar_V: np.ndarray,
+    bound: np.ndarray,
+    qp_solver: str,
+    rank: int,
+    feasibility_tolerance: float,
+    fallbacks: bool,
+    clock: QPClock,
+    first: bool,
+) -> np.ndarray | None:
+    """``min ½ Σ hᵢ zᵢ² − Σ lᵢ zᵢ  s.t.  D C̄ V z + bound ≥ 0`` (eq. 35 in ``z = Vᵀ w``).
+
+    The chosen solver first (with its retry settings), then, with
+    ``fallbacks``, the other tested solvers: an active-set solver stalling on a
+    degenerate vertex does not make the problem infeasible. Each call is capped in
+    iterations (:func:`solve_qp_bounded`). With ``first`` (the level's first curvature) each
+    solver's first settings always run; retry settings, and every attempt without
+    ``first``, only while ``clock``'s budget lasts.
+    """
+    names = [qp_solver]
+    if fallbacks:
+        names += [
+            name
+            for name in FALLBACK_ORDER
+            if name != qp_solver and name in qpsolvers.available_solvers
+        ]
+    gradient = np.zeros(curvature.size)
+    np.negative(linear, out=gradient[: linear.size])
+    G = -D_C_bar_V
+    for name in names:
+        backend = QP_BACKENDS.get(name, _DEFAULT_BACKEND)
+        problem_curvature = curvature
+        if backend.curvature_floor:  # only in the directions passed down, never the kept ones
+            problem_curvature = curvature.copy()
+            floor = backend.curvature_floor * curvature.max()
+            np.maximum(problem_curvature[rank:], floor, out=problem_curvature[rank:])
+        relaxed = bound
+        if backend.bound_relaxation:
+            relaxed = bound + backend.bound_relaxation * feasibility_tolerance
+        problem = qpsolvers.Problem(np.diag(problem_curvature), gradient, G, relaxed)
+        attempts = [backend.settings]
+        if backend.retry is not None:
+            attempts.append({**backend.settings, **backend.retry})
+        for retry, settings in enumerate(attempts):
+            # Past the budget every solver of the chain is still tried once, but nothing
+            # twice: no retry settings, no second curvature.
+            if not clock.allows(fallback=retry > 0 or not first):
+                break
+            start = time.perf_counter()
+            try:
+                solution = solve_qp_bounded(problem, name, **settings)
+            except (QPError, ValueError, np.linalg.LinAlgError):
+                continue
+            finally:
+                clock.attempts += 1
+                clock.spent_s += time.perf_counter() - start
+            info = solution.extras.get("info") if isinstance(solution.extras, dict) else None
+            closest = info is not None and str(info.status).endswith("CLOSEST_PRIMAL_FEASIBLE")
+            z = solution.x
+            if (solution.found or closest) and z is not None and np.isfinite(z).all():
+                return z
+    return None

@@ -22,7 +22,7 @@ from controller_server.errors import InvalidParams, ServerFault, wire_code
 from controller_server.features import Objective
 from controller_server.models import load_robot_model
 from controller_server.session import Session
-from controller_server.solvers import prioritized
+from controller_server.solvers import qp
 from controller_server.solvers.prioritized import (
     qp_data_limit,
     solve_prioritized,
@@ -190,7 +190,7 @@ def never_found(calls):
 def test_a_spent_budget_leaves_one_attempt_per_solver(monkeypatch, budget_s, top_level_calls):
     """Past the budget no solver is tried twice; before it, retries and both curvatures."""
     calls: list = []
-    monkeypatch.setattr(prioritized, "solve_qp_bounded", never_found(calls))
+    monkeypatch.setattr(qp, "solve_qp_bounded", never_found(calls))
     solution = solve_prioritized(*level_needing_a_qp(), qp_time_budget_s=budget_s)
     # daqp, quadprog, proxqp once each; with time: + daqp's and proxqp's retries, × 2 curvatures.
     assert solution.qp_attempts == len(calls) == top_level_calls
@@ -201,7 +201,7 @@ def test_a_spent_budget_leaves_one_attempt_per_solver(monkeypatch, budget_s, top
 
 def test_a_spent_budget_skips_retries_below_the_top_level(monkeypatch):
     calls: list = []
-    real = prioritized.solve_qp_bounded
+    real = qp.solve_qp_bounded
 
     def top_level_real(problem, solver, **settings):
         if not calls:  # the top level's first attempt succeeds
@@ -209,7 +209,7 @@ def test_a_spent_budget_skips_retries_below_the_top_level(monkeypatch):
             return real(problem, solver, **settings)
         return never_found(calls)(problem, solver, **settings)
 
-    monkeypatch.setattr(prioritized, "solve_qp_bounded", top_level_real)
+    monkeypatch.setattr(qp, "solve_qp_bounded", top_level_real)
     solution = solve_prioritized(*level_needing_a_qp(), qp_time_budget_s=0.0)
     assert [level.status for level in solution.levels] == ["solved", "solver failed"]
     assert solution.qp_attempts == 2  # the second level: daqp once, no retry
