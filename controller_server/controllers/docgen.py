@@ -12,7 +12,7 @@ import numpy as np
 
 from controller_server.behaviors import BEHAVIORS
 from controller_server.controllers import CONTROLLERS
-from controller_server.controllers.momentum import POINT_DEFAULTS, POINT_PREFIX
+from controller_server.controllers.point_targets import POINT_DEFAULTS, POINT_PREFIX
 
 __all__ = ["render_controllers_doc"]
 

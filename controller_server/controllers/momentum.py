@@ -25,7 +25,6 @@ thesis' baseline, and the first ablation of ch. 7.1.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -48,8 +47,9 @@ from controller_server.controllers.base import (
     ParamSpec,
     check_finite_dynamics,
     normalized_configuration_part,
-    vector_value,
 )
+from controller_server.controllers.diagnostics import core_diagnostics, with_extras
+from controller_server.controllers.point_targets import POINT_PREFIX, point_target
 from controller_server.dynamics import (
     CentroidalMotion,
     DynamicsTerms,
@@ -83,16 +83,7 @@ from controller_server.inverse_dynamics import (
 from controller_server.models import RobotModel
 from controller_server.solvers import KKTSolution, build_weighted_problem, solve_weighted_kkt
 
-__all__ = ["POINT_DEFAULTS", "POINT_PREFIX", "MomentumController", "TrackingController"]
-
-POINT_PREFIX = "point:"
-POINT_DEFAULTS: dict[str, Any] = {
-    "offset_in_frame": [0.0, 0.0, 0.0],
-    "target_velocity_in_world": [0.0, 0.0, 0.0],
-    "stiffness": 100.0,
-    "damping": 20.0,
-    "weight": 1.0,
-}
+__all__ = ["MomentumController", "TrackingController"]
 
 
 class MomentumController(Controller):
@@ -272,7 +263,9 @@ class MomentumController(Controller):
         """Validate everything first (all or nothing), then apply, points included."""
         points = {k: v for k, v in params.items() if k.startswith(POINT_PREFIX)}
         rest = {k: v for k, v in params.items() if not k.startswith(POINT_PREFIX)}
-        validated_points = {k[len(POINT_PREFIX) :]: self._point(k, v) for k, v in points.items()}
+        validated_points = {
+            k[len(POINT_PREFIX) :]: point_target(self.robot, k, v) for k, v in points.items()
+        }
         clip = self._clip
         if "clip" in rest and isinstance(rest["clip"], str):
             clip = load_motion_clip(rest["clip"], self.robot) if rest["clip"] else None
@@ -284,47 +277,6 @@ class MomentumController(Controller):
                 self._points.pop(name, None)
             else:
                 self._points[name] = target
-
-    def _point(self, key: str, value: Any) -> PointTarget | None:
-        field = f"params.{key}"
-        if value is None:
-            return None
-        if not isinstance(value, dict):
-            raise InvalidParams(
-                field, "a point target is a map (frame, target_position_in_world, …)"
-            )
-        unknown = set(value) - {"frame", "target_position_in_world", *POINT_DEFAULTS}
-        if unknown:
-            raise InvalidParams(field, f"unknown keys {sorted(unknown)}")
-        frame = value.get("frame")
-        if not isinstance(frame, str) or not self.robot.model.existFrame(frame):
-            frames = [f.name for f in self.robot.model.frames]
-            raise InvalidParams(f"{field}.frame", f"{frame=!r} is not a frame; available: {frames}")
-        merged = {**POINT_DEFAULTS, **value}
-        scalars = {}
-        for name in ("stiffness", "damping", "weight"):
-            number = merged[name]
-            if isinstance(number, bool) or not isinstance(number, int | float):
-                raise InvalidParams(f"{field}.{name}", f"{number!r} is not a number")
-            try:
-                scalars[name] = float(number)
-            except OverflowError:  # a Python int beyond the float range (not printed: huge)
-                raise InvalidParams(f"{field}.{name}", "beyond the float range") from None
-            if not math.isfinite(number) or number < 0:
-                raise InvalidParams(f"{field}.{name}", f"{number!r} must be finite and ≥ 0")
-        if "target_position_in_world" not in value:
-            raise InvalidParams(f"{field}.target_position_in_world", "required")
-        return PointTarget(
-            frame=frame,
-            offset_in_frame=vector_value(f"{field}.offset_in_frame", merged["offset_in_frame"], 3),
-            target_position_in_world=vector_value(
-                f"{field}.target_position_in_world", merged["target_position_in_world"], 3
-            ),
-            target_velocity_in_world=vector_value(
-                f"{field}.target_velocity_in_world", merged["target_velocity_in_world"], 3
-            ),
-            **scalars,
-        )
 
     def _validate(self, key: str, value: Any) -> Any:
         array = super()._validate(key, value)
@@ -577,39 +529,39 @@ class MomentumController(Controller):
         assert solution is not None
         acceleration = dynamics.acceleration
         objectives: list[Objective] = self._last_optimizer["objectives"]
-        cop, cmp_ = ground_reference_points(
-            position_contact_frames_in_world,
-            motion.position_com_in_world,
-            dynamics.contact_wrench_in_world,
-            flags,
-            self.in_force()["ground_height"],
+        optimizer = self._last_optimizer
+        core = core_diagnostics(
+            position_com_in_world=motion.position_com_in_world,
+            linear_momentum=motion.linear_momentum,
+            angular_momentum=motion.angular_momentum,
+            total_mass=self.robot.total_mass,
+            momentum_rates_desired=(
+                optimizer["linear_momentum_rate_desired"],
+                optimizer["angular_momentum_rate_desired"],
+            ),
+            momentum_rates_achieved=(motion.linear_momentum_rate, motion.angular_momentum_rate),
+            position_contact_frames_in_world=position_contact_frames_in_world,
+            contact_wrench_in_world=dynamics.contact_wrench_in_world,
+            supports=flags,
+            ground_height=self.in_force()["ground_height"],
+            support_polygon_xy=polygon,
+            objective_residuals={o.name: o.residual(acceleration) for o in objectives},
+            constraint_residual=solution.constraint_residual,
+            root_wrench_residual=dynamics.root_wrench_residual,
+            saturated_joints=dynamics.saturated_joints,
         )
-        return {
-            "position_com_in_world": motion.position_com_in_world,
-            "velocity_com_in_world": motion.linear_momentum / self.robot.total_mass,
-            "linear_momentum": motion.linear_momentum,
-            "angular_momentum": motion.angular_momentum,
-            "linear_momentum_rate_desired": self._last_optimizer["linear_momentum_rate_desired"],
-            "linear_momentum_rate_achieved": motion.linear_momentum_rate,
-            "angular_momentum_rate_desired": self._last_optimizer["angular_momentum_rate_desired"],
-            "angular_momentum_rate_achieved": motion.angular_momentum_rate,
-            "center_of_pressure": cop,
-            "centroidal_moment_pivot": cmp_,
-            "supports": list(flags),
-            "support_polygon_xy": polygon.reshape(-1),
-            "objective_residuals": {o.name: o.residual(acceleration) for o in objectives},
-            "constraint_residual": solution.constraint_residual,
-            "root_wrench_residual": dynamics.root_wrench_residual,
-            "saturated_joints": dynamics.saturated_joints,
-            "weighted": {
+        return with_extras(
+            core,
+            "weighted",
+            {
                 "optimizer_ran": optimizer_ran,
-                "angular_momentum_weight": self._last_optimizer["angular_momentum_weight"],
+                "angular_momentum_weight": optimizer["angular_momentum_weight"],
                 "objective_condition_number": solution.objective_condition_number,
                 "schur_condition_number": solution.schur_condition_number,
                 "objective_damping": solution.objective_damping,
                 "constraint_damping": solution.constraint_damping,
             },
-        }
+        )
 
 
 def _support_polygon(

@@ -21,7 +21,8 @@ solved by Algorithm 1 (:func:`controller_server.solvers.solve_prioritized`):
    limits); this picks the smallest, as the weighted controller's
    distribution does.
 
-These default priorities differ from Table 1; see :data:`OBJECTIVES` for
+These default priorities differ from Table 1; see
+:data:`~controller_server.controllers.prioritized_params.OBJECTIVES` for
 why. Each level is scaled to unit norm before the solve (:func:`_normalized`),
 so that one gain bound means the same in every level.
 
@@ -44,8 +45,8 @@ by default (de Lasa's ``k_v = 2 √k_p``).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from typing import Any, ClassVar, NamedTuple
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -53,12 +54,10 @@ from scipy.linalg import lapack
 
 from controller_server.balance_points import (
     admissible_cop_polygon,
-    ground_reference_points,
 )
-from controller_server.behaviors import Targets, behavior_parameters
+from controller_server.behaviors import Targets
 from controller_server.constraints import compute_support_equalities
 from controller_server.controllers.base import (
-    CONTACT_PARAMETERS,
     ControlInput,
     Controller,
     ControllerFailed,
@@ -67,13 +66,16 @@ from controller_server.controllers.base import (
     check_finite_dynamics,
     normalized_configuration_part,
 )
+from controller_server.controllers.diagnostics import core_diagnostics, with_extras
+from controller_server.controllers.height_target import HeightTarget
 from controller_server.controllers.prioritized_layout import (
-    DEFAULT_LIMIT_HORIZON_S,
     NUM_ROOT_DOFS,
     LayoutIndex,
     PrioritizedLayout,
     friction_cone_basis,
 )
+from controller_server.controllers.prioritized_levels import Term, normalized_level, term_residual
+from controller_server.controllers.prioritized_params import PRIORITIZED_PARAMETERS
 from controller_server.dynamics import DynamicsTerms, compute_dynamics_terms
 from controller_server.features import (
     Objective,
@@ -87,235 +89,35 @@ from controller_server.features.point_from_com import compute_point_from_com_obj
 from controller_server.features.setpoint import (
     critical_damping,
     setpoint_acceleration,
-    target_acceleration,
 )
 from controller_server.features.swing_foot import compute_swing_objective
 from controller_server.inverse_dynamics import wrenches_from_point_forces
 from controller_server.models import RobotModel
 from controller_server.solvers.prioritized import (
-    QP_TIME_BUDGET_S,
-    Level,
     PrioritizedSolution,
     solve_prioritized,
 )
 
-__all__ = ["OBJECTIVES", "PrioritizedController", "friction_cone_basis"]
+__all__ = ["PrioritizedController", "friction_cone_basis"]
 
 VERTICAL = slice(2, 3)
-TARGET_HANDOVER_S = 0.05
-"""The target objective hands over to the setpoint this long before T: re-planned every tick,
-eq. 7 amplifies what is left of a velocity error as T → 0."""
 EXACT_GAIN_BOUND = 1e15
 """Gain bound of the equations of motion: only directions at the rounding floor are singular."""
-
-
-class _Term(NamedTuple):
-    """An objective over one block of ``x = [τ, q̈, λ]`` (its ``A`` has the block's columns).
-
-    ``weight`` is the objective's weight when every row has it (``None`` otherwise),
-    ``active`` whether any row has a positive one, and ``row_basis`` orthonormal columns
-    holding those of ``A`` when its rows span fewer dimensions than they are
-    (:attr:`~controller_server.solvers.prioritized.Level.row_basis`).
-    """
-
-    objective: Objective
-    columns: slice
-    weight: float | None
-    active: bool
-    row_basis: np.ndarray | None = None
-
-
-OBJECTIVES: dict[str, tuple[int, float, str]] = {
-    "contact": (1, 1.0, "sole points toward the ground (Table 1)"),
-    "com": (2, 10.0, "CM over the centroid of the support points (Table 1, E_com∥)"),
-    "angular_momentum": (2, 10.0, "L̇_d = k_p (L_r − L) (eq. 8–9; Table 1: priority 3)"),
-    "trunk": (2, 1.0, "root (pelvis) orientation upright (cf. E_trunk of Table 2)"),
-    "pose": (2, 1.0, "rest pose of the joints (§4, E_pose; Table 1: priority 3)"),
-    "com_height": (3, 1.0, "CM height (Table 1, E_com⊥: priority 2)"),
-    "ankle": (
-        2,
-        0.0,
-        "each foot at its take-off offset from the CM in a jump's flight (E_ankle, §5)",
-    ),
-    "torque": (3, 1.0, "minimum torque on `torque_selection` (eq. 15)"),
-    "swing": (
-        2,
-        10.0,
-        "a walk's swing foot toward its foothold, lifted by the step height (E_swing, §6.1)",
-    ),
-}
-"""Objective name → (default priority, default weight α, role).
-
-Table 1's order (contact; CM and CM height; angular momentum and rest
-pose) is one ``set_params`` away, but it is not the default, because the
-thesis humanoid falls under the thesis pushes with it (measured, see
-docs/control.md): a CM objective strictly above the angular momentum takes all of
-the centre of pressure's authority to stop the CM, and the body pitches
-with nothing left to damp its rotation; and the CM height of a body
-standing on straight knees is a singular feature that, ranked above the
-rest pose, folds the legs. So the centroidal momentum (linear and angular,
-driven by the same ground wrench) is one level, weighted as the weighted
-controller weights it (α = 10 each against 1 for the pose), under the
-contacts; the CM height ranks below it.
-
-With these defaults ``pose`` uses every joint's freedom at level 2, so the
-level-3 objectives (``com_height``, ``torque``) have none left and do
-nothing: rank them at 2 (or ``pose`` at 3) to use them.
-"""
-
-
-def _priority_spec(name: str) -> ParamSpec:
-    default, _, role = OBJECTIVES[name]
-    return ParamSpec(
-        default, kind="int", minimum=1, maximum=10, doc=f"priority level of `{name}`: {role}"
-    )
-
-
-def _weight_spec(name: str) -> ParamSpec:
-    return ParamSpec(
-        OBJECTIVES[name][1],
-        minimum=0.0,
-        maximum=1e6,
-        doc=f"weight of `{name}` within its level: α of eq. 16 (rows × √α); 0 = off",
-    )
 
 
 class PrioritizedController(Controller):
     """de Lasa et al.'s prioritized balance controller (Table 1, Algorithm 1)."""
 
     name = "prioritized"
-    PARAMETERS: ClassVar[dict[str, ParamSpec]] = {
-        **{f"priority_{name}": _priority_spec(name) for name in OBJECTIVES},
-        **{f"weight_{name}": _weight_spec(name) for name in OBJECTIVES},
-        "contact_stiffness": ParamSpec(
-            100.0, minimum=0.0, maximum=1e6, doc="k_p of the contact setpoints (1/s²)"
-        ),
-        "com_stiffness": ParamSpec(20.0, minimum=0.0, maximum=1e6, doc="k_p of `com` (1/s²)"),
-        "com_offset_xy": ParamSpec(
-            [0.0, 0.0],
-            kind="vector",
-            minimum=-10.0,
-            maximum=10.0,
-            doc="y_r of `com` minus the centroid of the support points, x and y (m)",
-        ),
-        "cop_margin": ParamSpec(
-            0.02,
-            minimum=0.0,
-            maximum=1.0,
-            doc="`com` asks at most the CM acceleration whose COP stays this far inside "
-            "the support polygon (m; at most a quarter of the polygon's width)",
-        ),
-        "com_height": ParamSpec(
-            None,
-            minimum=0.0,
-            maximum=100.0,
-            doc="y_r of `com_height` above the ground (m); default the standing pose's",
-        ),
-        "com_height_stiffness": ParamSpec(
-            20.0, minimum=0.0, maximum=1e6, doc="k_p of `com_height` (1/s²)"
-        ),
-        "com_height_velocity": ParamSpec(
-            0.0,
-            minimum=-10.0,
-            maximum=10.0,
-            doc="ẏ_T of the target objective that reaches a new `com_height` (m/s; eq. 7), "
-            "held after T (a jump's take-off speed); 0: the height is held",
-        ),
-        "com_height_duration_s": ParamSpec(
-            0.5,
-            minimum=0.0,
-            maximum=100.0,
-            doc="T of the target objective (eq. 6–7) that reaches a new `com_height` (s)",
-        ),
-        "angular_momentum_stiffness": ParamSpec(
-            10.0, minimum=0.0, maximum=1e6, doc="k_p of eq. 9 (1/s)"
-        ),
-        "reference_angular_momentum": ParamSpec(
-            [0.0, 0.0, 0.0],
-            kind="vector",
-            minimum=-1e4,
-            maximum=1e4,
-            doc="L_r of eq. 9 about the CM, world axes (kg·m²/s); 0 damps rotation",
-        ),
-        "pose_stiffness": ParamSpec(30.0, minimum=0.0, maximum=1e6, doc="k_p of `pose` (1/s²)"),
-        "reference_joint_position": ParamSpec(
-            None,
-            kind="vector",
-            minimum=-1e3,
-            maximum=1e3,
-            doc="rest pose q_r, wire joint order (rad; ball: xyzw); default the standing pose's",
-        ),
-        "trunk_stiffness": ParamSpec(30.0, minimum=0.0, maximum=1e6, doc="k_p of `trunk` (1/s²)"),
-        "reference_trunk_orientation_xyzw": ParamSpec(
-            [0.0, 0.0, 0.0, 1.0],
-            kind="vector",
-            minimum=-1.0,
-            maximum=1.0,
-            doc="y_r of `trunk`: root orientation in world, scalar last; default the standing "
-            "pose's",
-        ),
-        "torque_selection": ParamSpec(
-            None,
-            kind="vector",
-            minimum=0.0,
-            maximum=1e6,
-            doc="diagonal of S in eq. 15 per joint DoF, wire order; default all 0 (off)",
-        ),
-        "ankle_stiffness": ParamSpec(100.0, minimum=0.0, maximum=1e6, doc="k_p of `ankle` (1/s²)"),
-        **behavior_parameters("prioritized"),
-        "damping_ratio": ParamSpec(
-            1.0, minimum=0.0, maximum=100.0, doc="ζ of every setpoint: k_v = 2 ζ √k_p (eq. 4)"
-        ),
-        **CONTACT_PARAMETERS,
-        "non_penetration": ParamSpec(
-            True, kind="bool", doc="enforce eq. 26 at the points carrying force"
-        ),
-        "contact_distance": ParamSpec(
-            0.005,
-            minimum=0.0,
-            maximum=1.0,
-            doc="sole points of a contact `support_mask` allows carry force when this close "
-            "to the ground, whatever the contact flags (m)",
-        ),
-        "joint_limit_horizon_s": ParamSpec(
-            DEFAULT_LIMIT_HORIZON_S,
-            minimum=0.005,
-            maximum=10.0,
-            doc="T of the joint-limit inequalities: no 1-DoF joint may reach past a limit "
-            "within T at its planned acceleration (eq. 27, velocity-aware) (s)",
-        ),
-        "gain_bound": ParamSpec(
-            1e4,
-            minimum=10.0,
-            maximum=1e12,
-            doc="B of Algorithm 1 below the equations of motion, on levels scaled to unit "
-            "norm: σ < 1/B is singular, damped steps ‖w‖ ≤ B ‖b̄‖ (Maciejewski eq. 18)",
-        ),
-        "qp_solver": ParamSpec(
-            "daqp",
-            kind="choice",
-            choices=("daqp", "quadprog", "proxqp"),
-            doc="QP solver of the constrained levels (via qpsolvers)",
-        ),
-        "qp_time_budget_s": ParamSpec(
-            QP_TIME_BUDGET_S,
-            minimum=0.0,
-            maximum=60.0,
-            doc="wall time of a tick's QP solves after which no QP is tried twice (no retry "
-            "settings, no second curvature): bounds a tick on a slow machine, at the price of "
-            "commands that depend on its load near the limits; a batch run that must not (a "
-            "push sweep) raises it (s)",
-        ),
-    }
+    PARAMETERS: ClassVar[dict[str, ParamSpec]] = PRIORITIZED_PARAMETERS
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self._data = robot.model.createData()
         self._index = LayoutIndex(robot)
         self._derived: dict[str, Any] = {}  # from the parameters; cleared by set_params
-        self._forces_cache: dict[int, _Term] = {}
+        self._forces_cache: dict[int, Term] = {}
         self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
-        self._height_change_start_s: float | None = None  # state time a new height was set
-        self._pending_height_change = False
+        self._height = HeightTarget()
         self._height_changes_seen = 0  # the behaviour's requests of a new CM height so far
         super().__init__(robot, params)
 
@@ -335,7 +137,7 @@ class PrioritizedController(Controller):
         super().set_params(params)
         self._derived = {}
         if old_height is not None and self._params["com_height"] != old_height:
-            self._pending_height_change = True
+            self._height.restart()
         if "behavior" in params:
             self._height_changes_seen = 0
 
@@ -376,7 +178,7 @@ class PrioritizedController(Controller):
         targets = self._host(control_input, terms, self._data)
         if targets is not None and targets.com_height_changes != self._height_changes_seen:
             self._height_changes_seen = targets.com_height_changes
-            self._pending_height_change = True
+            self._height.restart()
         p = self.in_force()
         flags = self.supports(control_input)
         layout = PrioritizedLayout(
@@ -414,21 +216,21 @@ class PrioritizedController(Controller):
                 f"non-finite {', '.join(not_finite)} at this state (the dynamics overflow); "
                 "no command"
             )
-        grouped: dict[int, list[_Term]] = {}
+        grouped: dict[int, list[Term]] = {}
         for name, term in objectives.items():
             if name not in ("dynamics", "forces") and term.active:
                 grouped.setdefault(p[f"priority_{name}"], []).append(term)
         # The equations of motion have full row rank (M ≻ 0) and a small condition number;
         # the levels on q̈ see nothing of the motionless forces in their null space.
         levels = [
-            _normalized_level(
+            normalized_level(
                 [objectives["dynamics"]],
                 layout.size,
                 well_conditioned=True,
                 null_space_part=layout.motionless_forces(),
             ),
-            *(_normalized_level(grouped[k], layout.size) for k in sorted(grouped)),
-            _normalized_level([objectives["forces"]], layout.size),
+            *(normalized_level(grouped[k], layout.size) for k in sorted(grouped)),
+            normalized_level([objectives["forces"]], layout.size),
         ]
         # The equations of motion are kept exactly (rounding floor only): a gain bound there
         # would let lower levels bend the dynamics of a heavy robot.
@@ -481,7 +283,7 @@ class PrioritizedController(Controller):
         terms: DynamicsTerms,
         layout: PrioritizedLayout,
         targets: Targets | None,
-    ) -> tuple[dict[str, _Term], dict[str, np.ndarray]]:
+    ) -> tuple[dict[str, Term], dict[str, np.ndarray]]:
         """The objectives by name, each over its block of ``x``, and the desired momentum rates.
 
         The rates are for the diagnostics. Every objective on ``q̈`` comes from the feature library
@@ -542,8 +344,8 @@ class PrioritizedController(Controller):
                 self._gravity,
                 friction_coefficient=layout.smallest_friction_coefficient,
             )
-            desired_linear_rate[2] = mass * self._height_acceleration(
-                control_input.time_s, com, com_velocity
+            desired_linear_rate[2] = mass * self._height.acceleration(
+                control_input.time_s, com, com_velocity, p
             )
             on_acceleration += [
                 compute_linear_momentum_objective(
@@ -621,9 +423,9 @@ class PrioritizedController(Controller):
                 )
             )
         objectives = {
-            "dynamics": _Term(layout.equations_of_motion(terms), slice(0, layout.size), 1.0, True),
+            "dynamics": Term(layout.equations_of_motion(terms), slice(0, layout.size), 1.0, True),
             **{
-                o.name: _Term(
+                o.name: Term(
                     o,
                     layout.acceleration,
                     weight,
@@ -641,22 +443,22 @@ class PrioritizedController(Controller):
         }
         return objectives, desired_rates
 
-    def _least_forces(self, layout: PrioritizedLayout) -> _Term:
+    def _least_forces(self, layout: PrioritizedLayout) -> Term:
         """``forces`` over the ``λ`` block (it depends on the number of loaded points only)."""
         term = self._forces_cache.get(layout.nl)
         if term is None:
-            term = _Term(layout.least_forces(), layout.force, 1.0, True)
+            term = Term(layout.least_forces(), layout.force, 1.0, True)
             self._forces_cache[layout.nl] = term
         return term
 
-    def _least_torque(self, layout: PrioritizedLayout) -> _Term:
+    def _least_torque(self, layout: PrioritizedLayout) -> Term:
         """``torque`` over the ``τ`` block (eq. 15), until the parameters change."""
         term = self._derived.get("torque")
         if term is None:
             p = self.in_force()
             selection = np.asarray(p["torque_selection"], dtype=float)
             weight = float(p["weight_torque"])
-            term = _Term(
+            term = Term(
                 layout.least_torque(selection, weight),
                 layout.torque,
                 None,
@@ -665,45 +467,12 @@ class PrioritizedController(Controller):
             self._derived["torque"] = term
         return term
 
-    def _height_acceleration(
-        self, time_s: float, com: np.ndarray, com_velocity: np.ndarray
-    ) -> float:
-        """``z̈_d`` of `com_height`: target objective (eq. 6–7) while a change runs, else eq. 4."""
-        p = self.in_force()
-        target = p["com_height"] + p["ground_height"]
-        if self._pending_height_change:
-            self._height_change_start_s = time_s
-            self._pending_height_change = False
-        if self._height_change_start_s is not None:
-            remaining = p["com_height_duration_s"] - (time_s - self._height_change_start_s)
-            if remaining > TARGET_HANDOVER_S:
-                return float(
-                    target_acceleration(
-                        com[2], com_velocity[2], target, p["com_height_velocity"], remaining
-                    )
-                )
-            self._height_change_start_s = None
-        stiffness = p["com_height_stiffness"]
-        if p["com_height_velocity"]:
-            # A target that ends in motion (a jump's thrust) holds that speed after T.
-            damping = critical_damping(stiffness, p["damping_ratio"])
-            return float(damping * (p["com_height_velocity"] - com_velocity[2]))
-        return float(
-            setpoint_acceleration(
-                target,
-                com[2],
-                com_velocity[2],
-                stiffness,
-                critical_damping(stiffness, p["damping_ratio"]),
-            )
-        )
-
     def _output(
         self,
         terms: DynamicsTerms,
         layout: PrioritizedLayout,
         flags: tuple[bool, ...],
-        objectives: dict[str, _Term],
+        objectives: dict[str, Term],
         desired_rates: dict[str, np.ndarray],
         solution: PrioritizedSolution,
         want_diagnostics: bool = True,
@@ -748,7 +517,7 @@ class PrioritizedController(Controller):
         terms: DynamicsTerms,
         layout: PrioritizedLayout,
         flags: tuple[bool, ...],
-        objectives: dict[str, _Term],
+        objectives: dict[str, Term],
         desired_rates: dict[str, np.ndarray],
         solution: PrioritizedSolution,
         acceleration: np.ndarray,
@@ -758,39 +527,40 @@ class PrioritizedController(Controller):
         """The tick's diagnostics (only on ticks that send them)."""
         p, robot, x = self.in_force(), self.robot, solution.x
         momentum = terms.momentum
-        cop, cmp_ = ground_reference_points(
-            terms.position_contact_frames_in_world,
-            terms.position_com_in_world,
-            wrenches,
-            flags,
-            p["ground_height"],
-        )
         support = compute_support_equalities(terms, flags)
         support_error = support.C @ acceleration - support.d
-        constraint_residual = math.sqrt(float(support_error @ support_error))
         dynamics = objectives["dynamics"].objective
-        return {
-            "position_com_in_world": terms.position_com_in_world,
-            "velocity_com_in_world": momentum.linear_momentum / terms.total_mass,
-            "linear_momentum": momentum.linear_momentum,
-            "angular_momentum": momentum.angular_momentum,
-            "linear_momentum_rate_desired": desired_rates["linear_momentum_rate"],
-            "linear_momentum_rate_achieved": momentum.R @ acceleration + momentum.r_bias,
-            "angular_momentum_rate_desired": desired_rates["angular_momentum_rate"],
-            "angular_momentum_rate_achieved": momentum.S @ acceleration + momentum.s_bias,
-            "center_of_pressure": cop,
-            "centroidal_moment_pivot": cmp_,
-            "supports": list(flags),
-            "support_polygon_xy": layout.support_polygon.reshape(-1),
-            "objective_residuals": {name: _residual(term, x) for name, term in objectives.items()},
-            "constraint_residual": constraint_residual,
-            "root_wrench_residual": float(
+        core = core_diagnostics(
+            position_com_in_world=terms.position_com_in_world,
+            linear_momentum=momentum.linear_momentum,
+            angular_momentum=momentum.angular_momentum,
+            total_mass=terms.total_mass,
+            momentum_rates_desired=(
+                desired_rates["linear_momentum_rate"],
+                desired_rates["angular_momentum_rate"],
+            ),
+            momentum_rates_achieved=(
+                momentum.R @ acceleration + momentum.r_bias,
+                momentum.S @ acceleration + momentum.s_bias,
+            ),
+            position_contact_frames_in_world=terms.position_contact_frames_in_world,
+            contact_wrench_in_world=wrenches,
+            supports=flags,
+            ground_height=p["ground_height"],
+            support_polygon_xy=layout.support_polygon,
+            objective_residuals={name: term_residual(term, x) for name, term in objectives.items()},
+            constraint_residual=math.sqrt(float(support_error @ support_error)),
+            root_wrench_residual=float(
                 np.linalg.norm(dynamics.A[:NUM_ROOT_DOFS] @ x - dynamics.b[:NUM_ROOT_DOFS])
             ),
-            "saturated_joints": int(
+            saturated_joints=int(
                 np.count_nonzero(np.abs(torque_unclipped) >= robot.torque_limit * (1 - 1e-6))
             ),
-            "prioritized": {
+        )
+        return with_extras(
+            core,
+            "prioritized",
+            {
                 "priority_levels": [
                     {
                         "objectives": list(level.names),
@@ -805,77 +575,4 @@ class PrioritizedController(Controller):
                 ],
                 "inequality_violation": solution.inequality_violation,
             },
-        }
-
-
-def _residual(term: _Term, x: np.ndarray) -> float:
-    """``‖W^½ (A x − b)‖`` of the objective on its block of ``x``."""
-    objective = term.objective
-    error = objective.A @ x[term.columns] - objective.b
-    if term.weight is None:
-        return math.sqrt(float((objective.weight * error) @ error))
-    return math.sqrt(term.weight) * math.sqrt(float(error @ error))
-
-
-def _normalized_level(
-    terms: Sequence[_Term],
-    size: int,
-    well_conditioned: bool = False,
-    null_space_part: np.ndarray | None = None,
-) -> Level:
-    """The level's rows ``√w A`` over ``x`` scaled to ``‖W^½ A‖_F = 1`` (de Lasa 2010, eq. 16, 37).
-
-    Same minimizers. The levels come in their own units (N for the equations of motion, m/s²
-    for features, kg·m²/s² per kg for momentum); scaled alike, one gain bound
-    ``B`` is a bound on each level's condition (σ < σ_max / B, within
-    ``√rank``, is singular) rather than on singular values in mixed units.
-    """
-    squared = 0.0
-    for objective, _, weight, *_ in terms:
-        A = objective.A
-        if weight is None:
-            squared += float(objective.weight @ (A * A).sum(axis=1))
-        else:
-            squared += weight * float(np.vdot(A, A))
-    scale = math.sqrt(squared)
-    rows = sum(term.objective.b.size for term in terms)
-    A_level = np.zeros((rows, size))
-    b_level = np.empty(rows)
-    start = 0
-    for objective, columns, weight, *_ in terms:
-        end = start + objective.b.size
-        if weight is None:
-            root_weight = np.sqrt(objective.weight / scale**2 if scale > 0.0 else objective.weight)
-            A_level[start:end, columns] = root_weight[:, None] * objective.A
-            b_level[start:end] = root_weight * objective.b
-        else:
-            root = math.sqrt(weight / scale**2 if scale > 0.0 else weight)
-            np.multiply(objective.A, root, out=A_level[start:end, columns])
-            np.multiply(objective.b, root, out=b_level[start:end])
-        start = end
-    return Level(
-        tuple(term.objective.name for term in terms),
-        A_level,
-        b_level,
-        well_conditioned,
-        null_space_part,
-        _row_basis(terms, rows),
-    )
-
-
-def _row_basis(terms: Sequence[_Term], rows: int) -> np.ndarray | None:
-    """The level's row basis: block diagonal of its objectives' (all rows for those without)."""
-    if all(term.row_basis is None for term in terms):
-        return None
-    if len(terms) == 1:
-        return terms[0].row_basis
-    bases = [
-        np.eye(term.objective.b.size) if term.row_basis is None else term.row_basis
-        for term in terms
-    ]
-    basis = np.zeros((rows, sum(part.shape[1] for part in bases)))
-    row = column = 0
-    for part in bases:
-        basis[row : row + part.shape[0], column : column + part.shape[1]] = part
-        row, column = row + part.shape[0], column + part.shape[1]
-    return basis
+        )
