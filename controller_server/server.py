@@ -34,14 +34,10 @@ robot needs:
 
 from __future__ import annotations
 
-import dataclasses
 import gc
 import itertools
 import logging
-import os
-import socket
 import subprocess
-import sys
 import threading
 import time
 from typing import Any
@@ -50,10 +46,12 @@ import msgpack
 import zmq
 
 from controller_server.asset_cache import AssetCache
-from controller_server.config import SINGLE_THREADED_BLAS, ServeConfig
+from controller_server.broker_setup import ServerStartError, enable_curve, start_worker
+from controller_server.config import ServeConfig
 from controller_server.memory import return_large_buffers_to_the_system
+from controller_server.routing import Gather, Pending, Route, WorkerRecord, error_of, error_reply
 from controller_server.session_table import SessionTable
-from controller_server.worker import REPLY_HEADER, REQUEST_HEADER, Channel, client_tag
+from controller_server.worker import REPLY_HEADER, REQUEST_HEADER
 from protocol.codec import decode, encode, peek
 from protocol.errors import AssetsMissing, ErrorCode, ProtocolError
 from protocol.messages import Asset, Error, Hello, Message, SessionStats, Stats
@@ -79,96 +77,6 @@ DEADLINE_DETAIL = (
 )
 
 
-class ServerStartError(RuntimeError):
-    """The server could not start (bad key file, endpoint in use, worker failed)."""
-
-
-@dataclasses.dataclass(slots=True)
-class _Route:
-    """Where a client's session lives, and who may use it."""
-
-    key: bytes
-    """Session key on the worker (opaque, never reused)."""
-    worker: bytes
-    client: str
-    """CURVE key (z85) of the client, or its peer address without CURVE."""
-    last_seen_s: float
-    in_flight: int = 0
-    client_tag: bytes = b""
-    """The client's tag in request headers: its requests share one turn at the worker."""
-
-    def __post_init__(self) -> None:
-        self.client_tag = client_tag(self.client)
-
-
-@dataclasses.dataclass(slots=True)
-class _Pending:
-    """A request forwarded to a worker and not yet answered by it."""
-
-    identity: bytes
-    seq: int
-    route: _Route
-    deadline_s: float
-    recycle_s: float
-    answered: bool = False
-
-
-@dataclasses.dataclass
-class _Worker:
-    identity: bytes
-    process: subprocess.Popen[bytes]
-    channel: Channel
-    ready: bool = False
-    writing: bool = False
-    """Whether the broker waits for its socket to take more (polls it for output)."""
-    routes: set[bytes] = dataclasses.field(default_factory=set)
-    """Routing ids of the clients whose sessions live here."""
-    pending: dict[bytes, _Pending] = dataclasses.field(default_factory=dict)
-    """Forwarded requests by id, in the order sent (and served)."""
-    backlog: list[list[bytes]] = dataclasses.field(default_factory=list)
-    """Messages for it held until it reports ready (a replacement warming up)."""
-
-    @property
-    def fd(self) -> int:
-        return self.channel.fileno()
-
-
-@dataclasses.dataclass
-class _Gather:
-    """A ``stats`` request waiting for the workers' answers."""
-
-    identity: bytes
-    seq: int
-    deadline_s: float
-    waiting: set[bytes]
-    sessions: list[SessionStats] = dataclasses.field(default_factory=list)
-
-
-def _error(
-    seq: int, code: ErrorCode, field: str, detail: str, max_message_bytes: int | None = None
-) -> Error:
-    return Error(
-        seq=max(seq, -1),
-        code=code,
-        field=field,
-        detail=detail,
-        max_message_bytes=max_message_bytes,
-    )
-
-
-def _error_of(exc: ProtocolError, max_message_bytes: int) -> Error:
-    """The ``error`` reply of a refused request (with what ``ASSETS_MISSING`` adds)."""
-    missing = exc.missing if isinstance(exc, AssetsMissing) else None
-    return Error(
-        seq=max(exc.seq, -1),
-        code=exc.code,
-        field=exc.field,
-        detail=exc.detail,
-        missing_asset_hashes=missing,
-        max_message_bytes=max_message_bytes if missing is not None else None,
-    )
-
-
 class ControllerServer:
     """Serve controllers to many clients over ZeroMQ, sessions in worker processes.
 
@@ -183,11 +91,11 @@ class ControllerServer:
         return_large_buffers_to_the_system()  # a long message's buffers leave with it
         self.config = config
         self.stop_event = threading.Event()
-        self.routes: dict[bytes, _Route] = {}
-        self.workers: dict[bytes, _Worker] = {}
-        self._workers_by_fd: dict[int, _Worker] = {}
+        self.routes: dict[bytes, Route] = {}
+        self.workers: dict[bytes, WorkerRecord] = {}
+        self._workers_by_fd: dict[int, WorkerRecord] = {}
         self._serving = False
-        self._gathers: dict[bytes, _Gather] = {}
+        self._gathers: dict[bytes, Gather] = {}
         self._ids = itertools.count(1)
         self._generation = itertools.count()
         self._next_worker_check_s = 0.0
@@ -233,28 +141,7 @@ class ControllerServer:
     # ----------------------------------------------------------------- set-up
 
     def _enable_curve(self) -> None:
-        from zmq.auth.thread import ThreadAuthenticator
-
-        path = self.config.curve_secret_key
-        try:
-            public, secret = zmq.auth.load_certificate(path)
-        except (OSError, ValueError) as exc:
-            raise ServerStartError(f"cannot read the server key {path!r}: {exc}") from None
-        if not secret:
-            raise ServerStartError(
-                f"{path!r} holds no secret key: pass the `.key_secret` file of `poise keygen`"
-            )
-        allowed = self.config.allow_client_keys
-        if allowed is not None and not os.path.isdir(allowed):
-            raise ServerStartError(f"--allow-client-keys {allowed!r} is not a directory")
-        self._authenticator = ThreadAuthenticator(self._context, log=log.getChild("auth"))
-        self._authenticator.start()
-        self._authenticator.configure_curve(
-            domain="*", location=allowed if allowed is not None else zmq.auth.CURVE_ALLOW_ANY
-        )
-        self._frontend.curve_secretkey = secret
-        self._frontend.curve_publickey = public
-        self._frontend.curve_server = True
+        self._authenticator = enable_curve(self._context, self._frontend, self.config)
 
     def start_workers(self) -> None:
         """Start every worker and wait until each is ready (warm: first replies are fast).
@@ -286,27 +173,7 @@ class ControllerServer:
 
     def _spawn_worker(self) -> None:
         identity = f"w{next(self._generation)}".encode()
-        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-        try:
-            process = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "controller_server.worker",
-                    identity.decode(),
-                    str(theirs.fileno()),
-                    self.config.to_json(),
-                    str(self.assets.directory),
-                ],
-                env={**os.environ, **SINGLE_THREADED_BLAS},
-                pass_fds=(theirs.fileno(),),
-            )
-        except BaseException:
-            ours.close()
-            raise
-        finally:
-            theirs.close()  # the worker holds it: when the worker exits, ours reads EOF
-        worker = _Worker(identity, process, Channel(ours, blocking=False))
+        worker = start_worker(identity, self.config, self.assets.directory)
         self.workers[identity] = worker
         self._workers_by_fd[worker.fd] = worker
         self._poller.register(worker.fd, _POLLIN)
@@ -384,7 +251,7 @@ class ControllerServer:
         identity = frames[0].bytes
         if len(frames) != 2:
             detail = f"expected one frame per message, got {len(frames) - 1}"
-            self._reply(identity, _error(-1, ErrorCode.MALFORMED, "", detail))
+            self._reply(identity, error_reply(-1, ErrorCode.MALFORMED, "", detail))
             return
         frame = frames[1]
         payload = frame.bytes
@@ -395,7 +262,7 @@ class ControllerServer:
         if len(payload) > self.config.max_message_bytes:
             self._reply(
                 identity,
-                _error(
+                error_reply(
                     -1,
                     ErrorCode.LIMIT_EXCEEDED,
                     "",
@@ -410,7 +277,7 @@ class ControllerServer:
     def _route(self, identity: bytes, client: str, payload: bytes) -> None:
         kind, seq, by_hash, refusal = peek(payload)
         if refusal is not None:  # over a cap: answered here, never decoded anywhere
-            self._reply(identity, _error_of(refusal, self.config.max_message_bytes))
+            self._reply(identity, error_of(refusal, self.config.max_message_bytes))
             return
         route = self.routes.get(identity)
         if route is not None and route.client != client:
@@ -431,27 +298,27 @@ class ControllerServer:
             self._reply(identity, self._local.handle(identity, payload))
 
     def _open(
-        self, identity: bytes, client: str, route: _Route | None, seq: int, payload: bytes
+        self, identity: bytes, client: str, route: Route | None, seq: int, payload: bytes
     ) -> None:
         now = time.monotonic()
         if route is None:
             refusal = self._session_cap_refusal(client)
             if refusal:
-                self._reply(identity, _error(seq, ErrorCode.LIMIT_EXCEEDED, "", refusal))
+                self._reply(identity, error_reply(seq, ErrorCode.LIMIT_EXCEEDED, "", refusal))
                 return
             if not self.workers:  # stopping: a recycled worker is not replaced
-                self._reply(identity, _error(seq, ErrorCode.LIMIT_EXCEEDED, "", "stopping"))
+                self._reply(identity, error_reply(seq, ErrorCode.LIMIT_EXCEEDED, "", "stopping"))
                 return
             worker = self._place(client)
             old = self.routes.pop(identity, None)
             if old is not None:  # a different peer's session on this routing id
                 self._drop_route(identity, old)
-            route = _Route(next(self._ids).to_bytes(8, "little"), worker.identity, client, now)
+            route = Route(next(self._ids).to_bytes(8, "little"), worker.identity, client, now)
             self.routes[identity] = route
             worker.routes.add(identity)
         self._forward(identity, route, seq, payload, self.config.hello_deadline_s)
 
-    def _place(self, client: str) -> _Worker:
+    def _place(self, client: str) -> WorkerRecord:
         """The worker for a new session of ``client``.
 
         A client's sessions occupy at most ``workers_per_client`` workers (all but
@@ -490,11 +357,11 @@ class ControllerServer:
                 return self._local.handle(identity, payload)
             return self.assets.receive(identity, client, request)
         except ProtocolError as exc:
-            return _error_of(exc, self.config.max_message_bytes)
+            return error_of(exc, self.config.max_message_bytes)
         except OSError as exc:  # the cache's disk: full, or gone
             log.error("asset cache: %s", exc)
             detail = f"the server cannot store the file now ({exc.strerror or exc}); retry later"
-            return _error(-1, ErrorCode.LIMIT_EXCEEDED, "", detail)
+            return error_reply(-1, ErrorCode.LIMIT_EXCEEDED, "", detail)
 
     def _check_assets(self, client: str, payload: bytes) -> Error | None:
         """The refusal of a ``hello`` naming files by hash: invalid, or files missing.
@@ -504,13 +371,13 @@ class ControllerServer:
         try:
             request = decode(payload, self.config.max_message_bytes)
         except ProtocolError as exc:
-            return _error_of(exc, self.config.max_message_bytes)
+            return error_of(exc, self.config.max_message_bytes)
         if not isinstance(request, Hello) or not request.model_asset_hashes:
             return None
         missing = self.assets.missing(client, request.model_asset_hashes.values())
         if not missing:
             return None
-        return _error_of(AssetsMissing(missing, request.seq), self.config.max_message_bytes)
+        return error_of(AssetsMissing(missing, request.seq), self.config.max_message_bytes)
 
     def _session_cap_refusal(self, client: str) -> str:
         if len(self.routes) >= self.config.max_sessions:
@@ -527,13 +394,13 @@ class ControllerServer:
         return ""
 
     def _forward(
-        self, identity: bytes, route: _Route, seq: int, payload: bytes, deadline_s: float
+        self, identity: bytes, route: Route, seq: int, payload: bytes, deadline_s: float
     ) -> None:
         worker = self.workers[route.worker]
         if route.in_flight >= self.config.max_in_flight:
             self._reply(
                 identity,
-                _error(
+                error_reply(
                     seq,
                     ErrorCode.LIMIT_EXCEEDED,
                     "",
@@ -546,7 +413,7 @@ class ControllerServer:
         route.last_seen_s = now
         route.in_flight += 1
         request_id = next(self._ids).to_bytes(8, "little")
-        worker.pending[request_id] = _Pending(
+        worker.pending[request_id] = Pending(
             identity, seq, route, now + deadline_s, now + deadline_s + self.config.recycle_after_s
         )
         header = REQUEST_HEADER.pack(request_id, route.key, now + deadline_s, route.client_tag)
@@ -572,7 +439,7 @@ class ControllerServer:
         self._poll_output(worker)
         return True
 
-    def _flush(self, worker: _Worker) -> None:
+    def _flush(self, worker: WorkerRecord) -> None:
         try:
             worker.channel.flush()
         except OSError as exc:
@@ -580,7 +447,7 @@ class ControllerServer:
             worker.channel.outgoing.clear()
         self._poll_output(worker)
 
-    def _poll_output(self, worker: _Worker) -> None:
+    def _poll_output(self, worker: WorkerRecord) -> None:
         """Poll the worker's socket for output while bytes wait for it, else not."""
         writing = bool(worker.channel.outgoing)
         if writing != worker.writing:
@@ -598,7 +465,7 @@ class ControllerServer:
 
     # ----------------------------------------------------------------- workers
 
-    def _serve_worker(self, worker: _Worker) -> None:
+    def _serve_worker(self, worker: WorkerRecord) -> None:
         messages = worker.channel.receive()
         if messages is None:  # its end closed: it exited
             if self._serving:
@@ -627,7 +494,7 @@ class ControllerServer:
             elif kind == b"stats":
                 self._collect_stats(worker.identity, frames[1], frames[2])
 
-    def _settle(self, pending: _Pending, session_open: bool, reply: bytes) -> None:
+    def _settle(self, pending: Pending, session_open: bool, reply: bytes) -> None:
         """Answer a worker's reply and keep the route in step with the worker's session.
 
         The last reply of a route decides: a session the worker closed (bye,
@@ -647,7 +514,7 @@ class ControllerServer:
         elif not session_open and current and pending.route.in_flight == 0:
             self._unroute(pending.identity, pending.route)
 
-    def _answer(self, pending: _Pending, data: bytes) -> None:
+    def _answer(self, pending: Pending, data: bytes) -> None:
         """Send the one answer a request gets (reply or error); later ones are dropped."""
         if not pending.answered:
             pending.answered = True
@@ -672,13 +539,13 @@ class ControllerServer:
         for request_id in [rid for rid, g in self._gathers.items() if now > g.deadline_s]:
             self._finish_gather(request_id)
 
-    def _answer_late(self, pending: _Pending, detail: str) -> None:
+    def _answer_late(self, pending: Pending, detail: str) -> None:
         if not pending.answered:
             self._answer(
-                pending, encode(_error(pending.seq, ErrorCode.DEADLINE_EXCEEDED, "", detail))
+                pending, encode(error_reply(pending.seq, ErrorCode.DEADLINE_EXCEEDED, "", detail))
             )
 
-    def _recycle(self, worker: _Worker) -> None:
+    def _recycle(self, worker: WorkerRecord) -> None:
         """Kill a stuck or dead worker, forget its sessions, start a fresh one."""
         log.warning(
             "worker %s stuck or dead: replaced; its %d sessions are lost",
@@ -703,7 +570,7 @@ class ControllerServer:
         if not self.stop_event.is_set():
             self._spawn_worker()
 
-    def _detach(self, worker: _Worker) -> None:
+    def _detach(self, worker: WorkerRecord) -> None:
         """Stop polling the worker's socket."""
         if self._workers_by_fd.get(worker.fd) is worker:
             self._poller.unregister(worker.fd)
@@ -711,14 +578,14 @@ class ControllerServer:
 
     # ----------------------------------------------------------------- sessions
 
-    def _unroute(self, identity: bytes, route: _Route) -> None:
+    def _unroute(self, identity: bytes, route: Route) -> None:
         if self.routes.get(identity) is route:
             del self.routes[identity]
         worker = self.workers.get(route.worker)
         if worker is not None:
             worker.routes.discard(identity)
 
-    def _drop_route(self, identity: bytes, route: _Route) -> None:
+    def _drop_route(self, identity: bytes, route: Route) -> None:
         self._unroute(identity, route)
         if route.worker in self.workers:
             self._to_worker(route.worker, [b"drop", route.key])
@@ -753,14 +620,14 @@ class ControllerServer:
             return
         if any(gather.identity == identity for gather in self._gathers.values()):
             detail = "a stats request of this client is still being answered; wait for it"
-            self._reply(identity, _error(request.seq, ErrorCode.LIMIT_EXCEEDED, "", detail))
+            self._reply(identity, error_reply(request.seq, ErrorCode.LIMIT_EXCEEDED, "", detail))
             return
         visible: dict[bytes, list[bytes]] = {}
         for route in self.routes.values():
             if self.config.stats_all or route.client == client:
                 visible.setdefault(route.worker, []).append(route.key)
         request_id = next(self._ids).to_bytes(8, "little")
-        gather = _Gather(
+        gather = Gather(
             identity, request.seq, time.monotonic() + self.config.deadline_s, set(visible)
         )
         self._gathers[request_id] = gather
@@ -784,7 +651,7 @@ class ControllerServer:
         if gather.waiting:
             self._reply(
                 gather.identity,
-                _error(gather.seq, ErrorCode.DEADLINE_EXCEEDED, "", "a worker did not report"),
+                error_reply(gather.seq, ErrorCode.DEADLINE_EXCEEDED, "", "a worker did not report"),
             )
         else:
             self._reply(gather.identity, Stats(seq=gather.seq, sessions=gather.sessions))

@@ -15,8 +15,8 @@ COMPOSITION_ROOT = "controller_server/cli/"
 """`poise`: composes server and clients (the product card fixes the top level)."""
 SHARED = "controller_server.models.description"
 """The one reading of robot files, shared by server and clients (docs/architecture.md): the
-only server module a client may import. It knows no session and no wire, and imports no
-other server module."""
+only server package a client may import (the package or any of its modules). It knows no
+session and no wire, and imports no other server module."""
 FORBIDDEN = {
     "protocol": {"controller_server", "clients"},
     "controller_server": {"clients"},
@@ -40,6 +40,8 @@ LAYERS: dict[str, list[tuple[str, ...]]] = {
         ("session",),
         ("session_table",),
         ("worker",),
+        ("routing",),  # what the broker tracks
+        ("broker_setup",),  # how it starts: CURVE, worker processes
         ("server",),  # … the broker
         ("cli",),  # the composition root
     ],
@@ -79,6 +81,11 @@ def layer_of(package: str, unit: str) -> int:
     return next(i for i, layer in enumerate(LAYERS[package]) if unit in layer)
 
 
+def is_shared(dotted: str) -> bool:
+    """Whether a module is the shared reading of robot files: the package or one of its modules."""
+    return dotted == SHARED or dotted.startswith(SHARED + ".")
+
+
 def upward_imports(module: str, source: str) -> list[str]:
     """The imports of ``module`` (a path under the root) that break either rule."""
     package = module.split("/")[0]
@@ -87,7 +94,7 @@ def upward_imports(module: str, source: str) -> list[str]:
     broken = []
     forbidden = set() if module.startswith(COMPOSITION_ROOT) else FORBIDDEN[package]
     broken += sorted(
-        name for name in imported if name != SHARED and name.split(".")[0] in forbidden
+        name for name in imported if not is_shared(name) and name.split(".")[0] in forbidden
     )
     if package not in LAYERS or not unit_of(dotted):  # a package's __init__: its facade
         return broken
@@ -148,12 +155,19 @@ def test_a_planted_upward_import_is_found():
 
 
 def test_the_shared_reading_of_robot_files_imports_no_other_layer_module():
-    path = ROOT / (SHARED.replace(".", "/") + ".py")
-    project = {
-        name for name in imported_modules(path.read_text()) if name.split(".")[0] in PACKAGES
-    }
-    # the wire's messages and its errors (which protocol.messages imports itself)
-    assert project <= {"protocol.messages", "protocol.errors"}, project
+    paths = sorted((ROOT / SHARED.replace(".", "/")).rglob("*.py"))
+    assert len(paths) > 1
+    outside = {}
+    for path in paths:
+        project = {
+            name
+            for name in imported_modules(path.read_text())
+            if name.split(".")[0] in PACKAGES and not is_shared(name)
+        }
+        # the wire's messages and its errors (which protocol.messages imports itself)
+        if not project <= {"protocol.messages", "protocol.errors"}:
+            outside[path.relative_to(ROOT).as_posix()] = sorted(project)
+    assert not outside, outside
 
 
 def test_the_check_sees_imports_inside_functions():

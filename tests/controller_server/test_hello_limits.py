@@ -29,8 +29,8 @@ from controller_server.models.description import (
     MAX_DOF,
     MAX_XML_DEPTH,
     MAX_XML_ELEMENTS,
-    _safe_suffix,
 )
+from controller_server.models.description.mjcf import safe_suffix as _safe_suffix
 from controller_server.session import Session
 from controller_server.session_table import SessionTable
 from controller_server.solvers.qp import solve_qp_bounded
