@@ -74,6 +74,7 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.behaviors.behavior import Behavior, FeetFromCom, Targets
+from controller_server.behaviors.limbs import spine_joints
 from controller_server.behaviors.observation import Observation
 from controller_server.models import RobotModel
 from controller_server.params import ParamSpec
@@ -357,27 +358,6 @@ class StandingJump(Behavior):
         self._set(**changes)
         if "com_height" in changes:
             self.com_height_changes += 1
-
-
-def spine_joints(model: pin.Model) -> list[int]:
-    """Wire indices (of their xyzw) of the spine: the ball joints, root excluded, that branch.
-
-    A joint branches when two or more end joints (leaves) hang from it: on the thesis
-    humanoid ``lower_back`` and ``upper_back`` (each carries the neck and both arms); a
-    leg or an arm holds one end joint only.
-    """
-    parents = list(model.parents)
-    leaves_below = [0] * model.njoints
-    for leaf in set(range(1, model.njoints)) - set(parents):
-        joint = leaf
-        while joint > 0:  # Pinocchio numbers a parent before its children
-            leaves_below[joint] += 1
-            joint = parents[joint]
-    return [
-        model.joints[j].idx_q - 7
-        for j in range(2, model.njoints)
-        if model.joints[j].nq == 4 and model.joints[j].nv == 3 and leaves_below[j] >= 2
-    ]
 
 
 def _feet_heading(orientations: np.ndarray) -> float:

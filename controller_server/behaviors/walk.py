@@ -83,6 +83,7 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.behaviors.behavior import Behavior, Targets
+from controller_server.behaviors.limbs import arm_dofs, knee_bend_direction
 from controller_server.behaviors.observation import Observation
 from controller_server.features.swing_foot import SwingTarget
 from controller_server.models import RobotModel
@@ -229,8 +230,6 @@ WALK_PARAMETERS: dict[str, ParamSpec] = {
 }
 """The walk's parameters (``set_params``, also while walking), documented in
 docs/controllers.md."""
-
-ARM_WORDS = ("shoulder", "elbow")
 
 
 class Walk(Behavior):
@@ -579,29 +578,3 @@ def _direction(angle: float) -> np.ndarray:
 def _yaw_rotation(angle: float) -> np.ndarray:
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def knee_bend_direction(model: pin.Model) -> np.ndarray:
-    """Per joint DoF: +1 on a knee's pitch (local y), −½ on a hip's or an ankle's, else 0."""
-    direction = np.zeros(model.nv - 6)
-    for joint_id in range(2, model.njoints):
-        name, joint = model.names[joint_id], model.joints[joint_id]
-        start = joint.idx_v - 6
-        scale = 1.0 if "knee" in name else -0.5 if ("hip" in name or "ankle" in name) else 0.0
-        kind = joint.shortname()
-        if scale and kind == "JointModelSpherical":
-            direction[start + 1] = scale
-        elif scale and kind == "JointModelRY":
-            direction[start] = scale
-    return direction
-
-
-def arm_dofs(model: pin.Model) -> np.ndarray:
-    """Per joint DoF, whether it belongs to a shoulder or an elbow (E_arms of §6.2)."""
-    arms = np.zeros(model.nv - 6, dtype=bool)
-    for joint_id in range(2, model.njoints):
-        joint = model.joints[joint_id]
-        if any(word in model.names[joint_id] for word in ARM_WORDS):
-            start = joint.idx_v - 6
-            arms[start : start + joint.nv] = True
-    return arms
