@@ -46,7 +46,7 @@ LAYERS: dict[str, list[tuple[str, ...]]] = {
         ("cli",),  # the composition root
     ],
     "clients": [
-        ("layout", "progress", "explain", "server_process"),  # the client library …
+        ("layout", "progress", "explain", "server_process", "curve_keys"),  # the library …
         ("state", "client"),
         ("sampling", "load", "pool"),  # … where runs execute
         ("physics",),  # the simulated robot: backends, model files, IMU
