@@ -13,7 +13,7 @@ Beside each answer the sweep gives the robot's own no-step bound
 (N·s) it could take on both feet without stepping, from its standing pose
 and soles, and the impulse survived (force × duration) as a share of it.
 
-A sweep writes its JSON and picture (:func:`write_sweep`) after every finished
+A sweep writes its JSON and picture (:func:`~.sweep_files.write_sweep`) after every finished
 bisection, each replaced in one step, and once more when it ends, however it
 ends (Ctrl-C, SIGTERM, a trial without an answer): a stopped sweep keeps every
 trial that ran, its JSON says ``"complete": false``.
@@ -22,14 +22,9 @@ trial that ran, its JSON says ``"complete": false``.
 from __future__ import annotations
 
 import functools
-import json
 import logging
 import math
-import os
-import signal
-import threading
-from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,6 +38,7 @@ from clients.pool import BATCH_DEADLINE_S, RunPool, Task
 from clients.progress import ProgressBar
 from clients.sim.runner import run_scenario
 from clients.sim.scenario import Scenario, initial_configuration, load_scenario
+from clients.sim.sweep_files import sweep_paths, write_sweep
 from protocol.errors import ErrorCode
 
 __all__ = [
@@ -59,7 +55,6 @@ __all__ = [
     "sweep_entries",
     "sweep_push",
     "trial_scenario",
-    "write_sweep",
 ]
 
 ANGULAR_OFF: dict[str, Any] = {"angular_momentum_gain": 0.0, "weight_angular_momentum": 0.0}
@@ -479,7 +474,7 @@ def sweep_controllers(
     every finished bisection and once more at the end, also when the sweep
     stops early (Ctrl-C, SIGTERM, a failed trial: the exception propagates
     once they are written), so a stopped sweep keeps what ran, with
-    ``"complete": false`` (:func:`write_sweep`).
+    ``"complete": false`` (:func:`~.sweep_files.write_sweep`).
 
     The push's body is the robot's (``chest`` on a robot without one: its trunk,
     :func:`~clients.physics.robot_terms.resolve_body`), checked before the first trial.
@@ -511,7 +506,7 @@ def sweep_controllers(
             pool.run(_SweepTasks(sweep, bases, settle_s, bar, save))
     finally:  # however the sweep ends, what ran is kept (a KeyboardInterrupt still propagates)
         if output_dir is not None:
-            json_path, png_path = _sweep_paths(sweep, output_dir)
+            json_path, png_path = sweep_paths(sweep, output_dir)
             stopped = ""
             if not sweep.complete:  # complete: written as its last bisection finished
                 write_sweep(sweep, output_dir)
@@ -520,71 +515,6 @@ def sweep_controllers(
                 stopped = f" (stopped: {finished} of {len(pairs)} bisections finished)"
             print(f"sweep{stopped}: {json_path}; picture: {png_path}", flush=True)
     return sweep
-
-
-def _sweep_paths(sweep: Sweep, output_dir: Path) -> tuple[Path, Path]:
-    """``output_dir/sweep_<scenario>.json`` and ``.png``."""
-    stem = output_dir / f"sweep_{sweep.scenario}"
-    return stem.with_suffix(".json"), stem.with_suffix(".png")
-
-
-def write_sweep(sweep: Sweep, output_dir: Path) -> tuple[Path, Path]:
-    """Write ``sweep_<scenario>.json`` and ``sweep_<scenario>.png`` into ``output_dir``.
-
-    Each is written under a temporary name beside it, then renamed over the old one
-    (:func:`os.replace`). Ctrl-C and SIGTERM wait until both are written (about a second:
-    the picture), so the two always show the same trials; then they stop the sweep.
-
-    Returns:
-        The paths of the JSON and the picture.
-    """
-    from clients.sim.sweep_plot import plot_sweep
-
-    json_path, png_path = _sweep_paths(sweep, output_dir)
-    partial = json_path.with_suffix(".json.partial")
-    with _interrupts_held():
-        try:
-            partial.write_text(json.dumps(sweep.to_json(), indent=2))
-            os.replace(partial, json_path)
-            partial = png_path.with_suffix(".png.partial")
-            plot_sweep(sweep, partial)
-            os.replace(partial, png_path)
-        finally:
-            partial.unlink(missing_ok=True)  # gone once renamed
-    return json_path, png_path
-
-
-@contextmanager
-def _interrupts_held() -> Iterator[None]:
-    """Ctrl-C and SIGTERM wait for the block: their handlers run once it ends.
-
-    A KeyboardInterrupt raised inside matplotlib can be lost (the sweep ran on) or turned
-    into another error (seen: a ``TypeError`` from one of its compiled functions), and a
-    file left half-written. Blocking the signals would not do: the kernel hands them to
-    another thread (a process pool's), and Python still runs the handler in the main one.
-    So the handlers are swapped for one that notes the signal. Python runs signal handlers
-    in the main thread only: elsewhere this holds nothing.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    held: list[int] = []
-
-    def hold(signum: int, _frame: object) -> None:
-        held.append(signum)
-
-    previous = {signum: signal.signal(signum, hold) for signum in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
-        if held:  # as it would have been handled in the block
-            handler = previous[held[0]]
-            if callable(handler):
-                handler(held[0], None)
-            elif handler == signal.SIG_DFL:
-                signal.raise_signal(held[0])
 
 
 def _push_body(scenario: Scenario, body: str) -> str:
