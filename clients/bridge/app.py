@@ -39,8 +39,9 @@ from clients.bridge.config import (
     imu_mount_on_root_body,
 )
 from clients.bridge.joint_map import JointMap
-from clients.bridge.loop import Bridge, BridgeReport, Pacer
+from clients.bridge.loop import Bridge, Pacer
 from clients.bridge.plant import RealTimePacer
+from clients.bridge.report import BridgeReport
 from clients.client import ControllerClient, CurveKeys
 from clients.physics.model_file import describe_model, hello_model
 from clients.track import RunObserver, Track
