@@ -10,8 +10,10 @@ controller's ``com`` setpoint track) sideways along the feet's axis,
     o(t) = o₀ + A sin(2π (t − t₀) / T) · l,
 
 with ``A`` = ``sway_amplitude``, ``T`` = ``sway_period_s``, ``o₀`` the client's offset when
-the sway starts and ``l`` the unit vector from the right foot to the left one then. It
-sways until another ``behavior`` is set; the client's offset is untouched.
+the sway starts and ``l`` the unit vector along the feet then. It sways until another
+``behavior`` is set; the client's offset is untouched. (The ``tracking`` baseline weighs
+the linear momentum objective 0: there it sways only with ``weight_linear_momentum``
+raised.)
 """
 
 from __future__ import annotations
