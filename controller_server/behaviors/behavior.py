@@ -78,7 +78,6 @@ class Behavior(ABC):
 
     Args:
         robot: The robot: what the behaviour derives from its model (its legs, spine, arms).
-        gravity: ``g`` (m/s²).
 
     Subclasses keep the parameter values they set in :attr:`overrides` (through
     :meth:`_set` and :meth:`_unset`, which count :attr:`revision`), count the CM heights
@@ -93,9 +92,10 @@ class Behavior(ABC):
     HOSTS: ClassVar[tuple[str, ...]]
     """The controllers that can host it (their ``name``)."""
 
-    def __init__(self, robot: RobotModel, gravity: float):
+    def __init__(self, robot: RobotModel):
         self.robot = robot
-        self.gravity = gravity
+        self.gravity = float(np.linalg.norm(robot.model.gravity.linear))
+        """``g`` (m/s²), from the robot's model."""
         self.state = "stand"
         self.overrides: dict[str, Any] = {}
         self.revision = 0

@@ -181,8 +181,8 @@ class StandingJump(Behavior):
     PARAMETERS = JUMP_PARAMETERS
     HOSTS = ("prioritized",)
 
-    def __init__(self, robot: RobotModel, gravity: float):
-        super().__init__(robot, gravity)
+    def __init__(self, robot: RobotModel):
+        super().__init__(robot)
         model = robot.model
         self._reach = float(
             pin.centerOfMass(model, model.createData(), robot.standing_configuration)[2]

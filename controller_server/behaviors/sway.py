@@ -53,8 +53,8 @@ class Sway(Behavior):
     PARAMETERS = SWAY_PARAMETERS
     HOSTS = ("momentum", "tracking", "prioritized")
 
-    def __init__(self, robot: RobotModel, gravity: float):
-        super().__init__(robot, gravity)
+    def __init__(self, robot: RobotModel):
+        super().__init__(robot)
         self.state = "sway"
         self._start_s: float | None = None
         self._offset_xy = np.zeros(2)

@@ -252,8 +252,8 @@ class Walk(Behavior):
     PARAMETERS = WALK_PARAMETERS
     HOSTS = ("prioritized",)
 
-    def __init__(self, robot: RobotModel, gravity: float):
-        super().__init__(robot, gravity)
+    def __init__(self, robot: RobotModel):
+        super().__init__(robot)
         points_in_frame = [np.asarray(contact.points_in_frame) for contact in robot.contacts]
         self.swing: SwingTarget | None = None
         self.com_acceleration_xy: np.ndarray | None = None
@@ -263,8 +263,6 @@ class Walk(Behavior):
         self._start_pose = np.zeros(0)  # the pose it starts from, set at the first tick
         self._knee_direction = knee_bend_direction(robot.model)
         self._arm_dofs = arm_dofs(robot.model)
-        self._gravity = gravity
-        self._model = robot.model
         self._since_s: float | None = None
         self._last_s: float | None = None
         self._heading = 0.0
@@ -315,7 +313,7 @@ class Walk(Behavior):
             )
         ]
         height = max(float(o.position_com_in_world[2] - o.ground_height), 0.05)
-        omega = math.sqrt(self._gravity / height)
+        omega = math.sqrt(self.gravity / height)
         com_xy = o.position_com_in_world[:2]
         capture = com_xy + o.velocity_com_in_world[:2] / omega
         command = p["walk_speed"] != 0.0 or p["walk_turn_rate"] != 0.0
@@ -451,9 +449,9 @@ class Walk(Behavior):
 
     def _rest_pose(self, bend: float) -> list[float]:
         """The starting pose with the knees' pitch bent by ``bend`` (hips, ankles −½ each)."""
-        if self._model is None or bend == 0.0:
+        if bend == 0.0:
             return self._start_pose.tolist()
-        model = self._model
+        model = self.robot.model
         q = np.concatenate([[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], self._start_pose])
         dq = np.concatenate([np.zeros(6), bend * self._knee_direction])
         return pin.integrate(model, q, dq)[7:].tolist()

@@ -300,8 +300,7 @@ class Controller(ABC):
         if name == "balance":
             return None
         if self._behavior is None:
-            gravity = float(np.linalg.norm(self.robot.model.gravity.linear))
-            self._behavior = BEHAVIORS[name](self.robot, gravity)
+            self._behavior = BEHAVIORS[name](self.robot)
         observation = Observation(
             time_s=control_input.time_s,
             position_com_in_world=terms.position_com_in_world,
