@@ -31,10 +31,11 @@ LAYERS: dict[str, list[tuple[str, ...]]] = {
         ("momentum", "balance_points"),  # centroidal momentum rates, COP and CMP
         ("dynamics",),  # one state's M, h, Jacobians, drifts
         ("constraints",),
-        ("features",),  # tasks: each objective's rows over q̈
+        ("features",),  # each objective's rows over q̈
         ("solvers",),  # KKT of App. D, Algorithm 1, QPs
         ("inverse_dynamics", "estimation"),
         ("behaviors",),  # walk, jump: references for the controllers
+        ("tasks",),  # objectives as objects, on one stack for both controllers
         ("controllers",),
         ("wire", "config", "memory", "asset_cache"),  # serving …
         ("session",),

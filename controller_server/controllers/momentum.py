@@ -29,11 +29,8 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
-import pinocchio as pin
 
 from controller_server.balance_points import (
-    admissible_cop_polygon,
-    ground_reference_points,
     support_polygon,
 )
 from controller_server.behaviors import behavior_parameters
@@ -56,24 +53,11 @@ from controller_server.dynamics import (
     centroidal_motion,
     compute_contact_geometry,
     compute_dynamics_terms,
-    point_kinematics,
 )
 from controller_server.errors import InvalidParams
 from controller_server.features import (
-    JointLimitSet,
-    MotionClip,
     Objective,
-    PointTarget,
-    admissible_linear_momentum_rate,
-    angular_momentum_weight,
-    compute_angular_momentum_objective,
-    compute_linear_momentum_objective,
-    compute_point_objective,
-    compute_tracking_objective,
-    default_joint_limits,
-    desired_linear_momentum_rate,
     load_motion_clip,
-    soft_limit_gains,
 )
 from controller_server.inverse_dynamics import (
     InverseDynamicsResult,
@@ -82,6 +66,14 @@ from controller_server.inverse_dynamics import (
 )
 from controller_server.models import RobotModel
 from controller_server.solvers import KKTSolution, build_weighted_problem, solve_weighted_kkt
+from controller_server.tasks import (
+    CopWeightedAngularMomentumTask,
+    LinearMomentumTask,
+    PointTask,
+    TaskStack,
+    Tick,
+    TrackingTask,
+)
 
 __all__ = ["MomentumController", "TrackingController"]
 
@@ -221,22 +213,24 @@ class MomentumController(Controller):
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self._data = robot.model.createData()
-        self._limits = JointLimitSet(default_joint_limits(robot), robot.model.nv)
         self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
-        self._clip: MotionClip | None = None
-        self._points: dict[str, PointTarget] = {}
+        self._tracking = TrackingTask(robot)
+        self.tasks = TaskStack()
+        """``tracking``, ``linear_momentum``, ``angular_momentum``, then the point targets."""
+        self.tasks.add(self._tracking)
+        self.tasks.add(LinearMomentumTask())
+        self.tasks.add(CopWeightedAngularMomentumTask())
         self._ticks = 0
         self._last_solution: KKTSolution | None = None
         self._last_flags: tuple[bool, ...] | None = None
         self._last_wrenches: np.ndarray | None = None
         self._last_optimizer: dict[str, Any] = {}
-        self._tracking_weight: np.ndarray | None = None  # from the parameters, when first needed
         super().__init__(robot, params)
 
     # Parameters -----------------------------------------------------------------
 
     def _overrides_changed(self) -> None:
-        self._tracking_weight = None
+        self.tasks.reset()
 
     def default_value(self, key: str) -> Any:
         """Joint weights default to ones (the rest: :meth:`Controller.default_value`)."""
@@ -247,8 +241,11 @@ class MomentumController(Controller):
     def parameters(self) -> dict[str, Any]:
         """Every parameter, with point targets as ``point:<name>`` records."""
         values = super().parameters()
-        for name, target in self._points.items():
-            values[POINT_PREFIX + name] = {
+        for slot in self.tasks:
+            if not isinstance(slot.task, PointTask):
+                continue
+            target = slot.task.target
+            values[slot.task.name] = {
                 "frame": target.frame,
                 "offset_in_frame": target.offset_in_frame.tolist(),
                 "target_position_in_world": target.target_position_in_world.tolist(),
@@ -266,17 +263,17 @@ class MomentumController(Controller):
         validated_points = {
             k[len(POINT_PREFIX) :]: point_target(self.robot, k, v) for k, v in points.items()
         }
-        clip = self._clip
+        clip = self._tracking.clip
         if "clip" in rest and isinstance(rest["clip"], str):
             clip = load_motion_clip(rest["clip"], self.robot) if rest["clip"] else None
         super().set_params(rest)
-        self._tracking_weight = None
-        self._clip = clip
+        self.tasks.reset()
+        self._tracking.clip = clip
         for name, target in validated_points.items():
             if target is None:
-                self._points.pop(name, None)
+                self.tasks.remove(POINT_PREFIX + name)
             else:
-                self._points[name] = target
+                self.tasks.add(PointTask(name, target), target.weight)
 
     def _validate(self, key: str, value: Any) -> Any:
         array = super()._validate(key, value)
@@ -388,24 +385,6 @@ class MomentumController(Controller):
             diagnostics=diagnostics,
         )
 
-    def _reference(self, control_input: ControlInput) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        p, model = self.in_force(), self.robot.model
-        if self._clip is not None:
-            sample = self._clip.sample(
-                control_input.time_s,
-                start_s=p["clip_start_s"],
-                speed=p["clip_speed"],
-                loop=p["clip_loop"],
-            )
-            q_ref, v_ref, a_ref = sample.q.copy(), sample.v, sample.a
-        else:
-            q_ref = pin.neutral(model)
-            q_ref[3:7] = p["reference_base_orientation_xyzw"]
-            q_ref[7:] = p["reference_joint_position"]
-            v_ref = a_ref = np.zeros(model.nv)
-        q_ref[:3] = control_input.q[:3]  # the root position is left to the balance objectives
-        return q_ref, v_ref, a_ref
-
     def _optimize(
         self,
         control_input: ControlInput,
@@ -414,88 +393,22 @@ class MomentumController(Controller):
         flags: tuple[bool, ...],
         polygon: np.ndarray,
     ) -> None:
-        p, model = self.in_force(), self.robot.model
-        q, v = control_input.q, control_input.v
-        q_ref, v_ref, a_ref = self._reference(control_input)
-        errors = self._limits.errors(q)
-        stiffness, damping = soft_limit_gains(
-            p["stiffness"],
-            p["damping"],
-            p["joint_limit_stiffness"],
-            p["joint_limit_damping"],
-            errors,
+        p = self.in_force()
+        self.tasks.follow(p)
+        tick = Tick(
+            robot=self.robot,
+            data=self._data,
+            q=control_input.q,
+            v=control_input.v,
+            time_s=control_input.time_s,
+            terms=terms,
+            params=p,
+            supports=flags,
+            gravity=self._gravity,
+            support_polygon_xy=polygon,
+            contact_wrench_in_world=wrenches,
         )
-        if self._tracking_weight is None:  # reset by set_params
-            self._tracking_weight = np.concatenate(
-                [
-                    np.zeros(3),
-                    np.full(3, p["weight_root_orientation"]),
-                    p["weight_tracking"] * np.asarray(p["joint_weights"]),
-                ]
-            )
-        objectives = [
-            compute_tracking_objective(
-                model, q, v, q_ref, v_ref, a_ref, stiffness, damping, self._tracking_weight
-            )
-        ]
-
-        momentum, mass = terms.momentum, terms.total_mass
-        supporting = [index for index, on in enumerate(flags) if on]
-        desired_rate = np.full(3, np.nan)
-        if supporting and p["weight_linear_momentum"] > 0:
-            support_jacobian = sum(terms.support_jacobians[index][:3] for index in supporting)
-            support_velocity = support_jacobian @ v / len(supporting)
-            com_desired = terms.position_contact_frames_in_world[supporting].sum(axis=0) / len(
-                supporting
-            )
-            com_desired[:2] += p["com_offset_xy"]
-            desired_rate = desired_linear_momentum_rate(
-                momentum,
-                mass,
-                terms.position_com_in_world,
-                com_desired,
-                support_velocity,
-                p["momentum_stiffness"],
-                p["momentum_damping"],
-            )
-            desired_rate = admissible_linear_momentum_rate(
-                desired_rate,
-                mass,
-                terms.position_com_in_world,
-                admissible_cop_polygon(polygon, p["cop_margin"]),
-                p["ground_height"],
-                self._gravity,
-                friction_coefficient=min(
-                    mu for mu, on in zip(p["friction_coefficients"], flags, strict=True) if on
-                ),
-            )
-            objectives.append(
-                compute_linear_momentum_objective(
-                    momentum, mass, desired_rate, p["weight_linear_momentum"]
-                )
-            )
-        cop, cmp_ = ground_reference_points(
-            terms.position_contact_frames_in_world,
-            terms.position_com_in_world,
-            wrenches,
-            flags,
-            p["ground_height"],
-        )
-        angular_weight = angular_momentum_weight(
-            p["angular_momentum_gain"], cop, cmp_, p["weight_angular_momentum"]
-        )
-        if angular_weight > 0:
-            objectives.append(
-                compute_angular_momentum_objective(
-                    momentum, mass, angular_weight, p["angular_momentum_damping"]
-                )
-            )
-        for name, target in self._points.items():
-            point = point_kinematics(
-                model, self._data, model.getFrameId(target.frame), target.offset_in_frame[None, :]
-            )
-            objectives.append(compute_point_objective(name, target, point))
-
+        objectives = [solved.objective for solved in self.tasks.solve_rows(tick)]
         problem = build_weighted_problem(
             objectives,
             compute_support_equalities(terms, flags),
@@ -505,15 +418,12 @@ class MomentumController(Controller):
         solution = solve_weighted_kkt(problem)
         self._last_solution = solution
         self._last_flags = flags
+        unknown = np.full(3, np.nan)
         self._last_optimizer = {
             "objectives": objectives,
-            "linear_momentum_rate_desired": desired_rate,
-            "angular_momentum_weight": angular_weight,
-            "angular_momentum_rate_desired": (
-                -p["angular_momentum_damping"] * momentum.angular_momentum
-                if angular_weight > 0
-                else np.full(3, np.nan)
-            ),
+            "linear_momentum_rate_desired": tick.reports.get("linear_momentum_rate", unknown),
+            "angular_momentum_weight": tick.reports.get("angular_momentum_weight", 0.0),
+            "angular_momentum_rate_desired": tick.reports.get("angular_momentum_rate", unknown),
         }
 
     def _diagnostics(

@@ -14,10 +14,10 @@ from controller_server.controllers.base import vector_value
 from controller_server.errors import InvalidParams
 from controller_server.features import PointTarget
 from controller_server.models import RobotModel
+from controller_server.tasks import POINT_PREFIX
 
 __all__ = ["POINT_DEFAULTS", "POINT_PREFIX", "point_target"]
 
-POINT_PREFIX = "point:"
 POINT_DEFAULTS: dict[str, Any] = {
     "offset_in_frame": [0.0, 0.0, 0.0],
     "target_velocity_in_world": [0.0, 0.0, 0.0],

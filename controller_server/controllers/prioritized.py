@@ -52,9 +52,6 @@ import numpy as np
 import pinocchio as pin
 from scipy.linalg import lapack
 
-from controller_server.balance_points import (
-    admissible_cop_polygon,
-)
 from controller_server.behaviors import Targets
 from controller_server.constraints import compute_support_equalities
 from controller_server.controllers.base import (
@@ -67,7 +64,6 @@ from controller_server.controllers.base import (
     normalized_configuration_part,
 )
 from controller_server.controllers.diagnostics import core_diagnostics, with_extras
-from controller_server.controllers.height_target import HeightTarget
 from controller_server.controllers.prioritized_layout import (
     NUM_ROOT_DOFS,
     LayoutIndex,
@@ -75,27 +71,27 @@ from controller_server.controllers.prioritized_layout import (
     friction_cone_basis,
 )
 from controller_server.controllers.prioritized_levels import Term, normalized_level, term_residual
-from controller_server.controllers.prioritized_params import PRIORITIZED_PARAMETERS
+from controller_server.controllers.prioritized_params import OBJECTIVES, PRIORITIZED_PARAMETERS
 from controller_server.dynamics import DynamicsTerms, compute_dynamics_terms
-from controller_server.features import (
-    Objective,
-    admissible_linear_momentum_rate,
-    compute_angular_momentum_objective,
-    compute_ground_contact_objective,
-    compute_linear_momentum_objective,
-    compute_posture_objectives,
-)
-from controller_server.features.point_from_com import compute_point_from_com_objective
-from controller_server.features.setpoint import (
-    critical_damping,
-    setpoint_acceleration,
-)
-from controller_server.features.swing_foot import compute_swing_objective
 from controller_server.inverse_dynamics import wrenches_from_point_forces
 from controller_server.models import RobotModel
 from controller_server.solvers.prioritized import (
     PrioritizedSolution,
     solve_prioritized,
+)
+from controller_server.tasks import (
+    AngularMomentumTask,
+    AnkleTask,
+    ComHeightTask,
+    ComTask,
+    ContactTask,
+    HeightTarget,
+    PoseTask,
+    SwingTask,
+    TaskStack,
+    Tick,
+    TorqueTask,
+    TrunkTask,
 )
 
 __all__ = ["PrioritizedController", "friction_cone_basis"]
@@ -118,6 +114,21 @@ class PrioritizedController(Controller):
         self._forces_cache: dict[int, Term] = {}
         self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._height = HeightTarget()
+        self.tasks = TaskStack()
+        """The objectives below the equations of motion and above ``forces``, by name."""
+        for task in (
+            ContactTask(),
+            ComTask(self._height),
+            ComHeightTask(self._height),
+            AngularMomentumTask(),
+            PoseTask(),
+            TrunkTask(),
+            AnkleTask(),
+            SwingTask(),
+            TorqueTask(),
+        ):
+            level, weight, _ = OBJECTIVES[task.name]
+            self.tasks.add(task, weight, level)
         self._height_changes_seen = 0  # the behaviour's requests of a new CM height so far
         super().__init__(robot, params)
 
@@ -136,6 +147,7 @@ class PrioritizedController(Controller):
         old_height = self._params.get("com_height")
         super().set_params(params)
         self._derived = {}
+        self.tasks.reset()
         if old_height is not None and self._params["com_height"] != old_height:
             self._height.restart()
         if "behavior" in params:
@@ -143,6 +155,7 @@ class PrioritizedController(Controller):
 
     def _overrides_changed(self) -> None:
         self._derived = {}
+        self.tasks.reset()
 
     def _validate(self, key: str, value: Any) -> Any:
         validated = super()._validate(key, value)
@@ -190,7 +203,8 @@ class PrioritizedController(Controller):
             p["ground_height"],
             p["contact_distance"],
         )
-        objectives, desired_rates = self._objectives(control_input, terms, layout, targets)
+        self.tasks.follow(p)
+        objectives, desired_rates = self._objectives(control_input, terms, layout, flags, targets)
         D, f = layout.inequalities(
             control_input.q, control_input.v, p["non_penetration"], p["joint_limit_horizon_s"]
         )
@@ -219,7 +233,7 @@ class PrioritizedController(Controller):
         grouped: dict[int, list[Term]] = {}
         for name, term in objectives.items():
             if name not in ("dynamics", "forces") and term.active:
-                grouped.setdefault(p[f"priority_{name}"], []).append(term)
+                grouped.setdefault(self.tasks[name].level, []).append(term)
         # The equations of motion have full row rank (M ≻ 0) and a small condition number;
         # the levels on q̈ see nothing of the motionless forces in their null space.
         levels = [
@@ -282,164 +296,47 @@ class PrioritizedController(Controller):
         control_input: ControlInput,
         terms: DynamicsTerms,
         layout: PrioritizedLayout,
+        flags: tuple[bool, ...],
         targets: Targets | None,
     ) -> tuple[dict[str, Term], dict[str, np.ndarray]]:
         """The objectives by name, each over its block of ``x``, and the desired momentum rates.
 
-        The rates are for the diagnostics. Every objective on ``q̈`` comes from the feature library
-        (:mod:`controller_server.features`), over the layout's ``q̈`` block. A behaviour's
-        ``targets`` give ``com`` a CM acceleration and ``swing`` and ``ankle`` their references.
+        The equations of motion and ``forces`` are the problem's own; every other objective
+        is a task of the stack (:attr:`tasks`), over the layout's ``q̈`` or ``τ`` block. The
+        rates are for the diagnostics.
         """
-        p, model = self.in_force(), self.robot.model
-        q, v = control_input.q, control_input.v
-        momentum, mass = terms.momentum, terms.total_mass
-        ratio = p["damping_ratio"]
-        on_acceleration: list[Objective] = []
-        # Contact (Table 1, priority 1): each sole point toward its ground projection.
-        if layout.point_jacobian.shape[0]:
-            stiffness = p["contact_stiffness"]
-            on_acceleration.append(
-                compute_ground_contact_objective(
-                    layout.point_jacobian,
-                    layout.point_drift,
-                    layout.point_positions,
-                    v,
-                    p["ground_height"],
-                    stiffness,
-                    critical_damping(stiffness, ratio),
-                    p["weight_contact"],
-                )
-            )
-        # CM over the support centroid and at its height (Table 1, priority 2).
-        com = terms.position_com_in_world
-        com_velocity = momentum.linear_momentum / mass
-        desired_linear_rate = np.full(3, np.nan)
-        if layout.support_positions.shape[0]:
-            centroid = layout.support_positions[:, :2].mean(axis=0)
-            stiffness = p["com_stiffness"]
-            damping = critical_damping(stiffness, ratio)
-            offset = p["com_offset_xy"]
-            asked = None if targets is None else targets.com_acceleration_xy
-            if asked is not None and stiffness > 0.0:
-                # A behaviour's CM acceleration (a walk's pendulum): the offset whose eq. 4
-                # setpoint asks for it, within the offset's range (`com_offset_xy`).
-                offset = np.clip(
-                    com[:2] + (asked + damping * com_velocity[:2]) / stiffness - centroid,
-                    -10.0,
-                    10.0,
-                )
-            desired_xy = setpoint_acceleration(
-                centroid + offset, com[:2], com_velocity[:2], stiffness, damping
-            )
-            # Ask only what the ground can give without turning the body: the COP this
-            # needs stays `cop_margin` inside the feet (as the weighted controller's L̇_des).
-            # Otherwise `com` takes all of the COP's authority and the angular momentum
-            # objective below it has none left (a 220 N head push then fells the robot).
-            desired_linear_rate = admissible_linear_momentum_rate(
-                mass * np.array([*desired_xy, 0.0]),
-                mass,
-                com,
-                admissible_cop_polygon(layout.support_polygon, p["cop_margin"]),
-                p["ground_height"],
-                self._gravity,
-                friction_coefficient=layout.smallest_friction_coefficient,
-            )
-            desired_linear_rate[2] = mass * self._height.acceleration(
-                control_input.time_s, com, com_velocity, p
-            )
-            on_acceleration += [
-                compute_linear_momentum_objective(
-                    momentum, mass, desired_linear_rate, p["weight_com"], name="com"
-                ),
-                compute_linear_momentum_objective(
-                    momentum,
-                    mass,
-                    desired_linear_rate,
-                    p["weight_com_height"],
-                    axes=VERTICAL,
-                    name="com_height",
-                ),
-            ]
-        # Angular momentum (eq. 8–9), rest pose and trunk (priority 2).
-        desired_angular_rate = p["angular_momentum_stiffness"] * (
-            p["reference_angular_momentum"] - momentum.angular_momentum
+        tick = Tick(
+            robot=self.robot,
+            data=self._data,
+            q=control_input.q,
+            v=control_input.v,
+            time_s=control_input.time_s,
+            terms=terms,
+            params=self.in_force(),
+            supports=flags,
+            gravity=self._gravity,
+            targets=targets,
+            loaded=layout,
         )
-        on_acceleration.append(
-            compute_angular_momentum_objective(
-                momentum, mass, p["weight_angular_momentum"], desired_rate=desired_angular_rate
-            )
-        )
-        trunk, pose = compute_posture_objectives(
-            model,
-            q,
-            v,
-            p["reference_trunk_orientation_xyzw"],
-            p["reference_joint_position"],
-            p["trunk_stiffness"],
-            p["pose_stiffness"],
-            ratio,
-            p["weight_trunk"],
-            p["weight_pose"],
-        )
-        on_acceleration += [pose, trunk]
-        feet = None if targets is None else targets.feet_from_com
-        if p["weight_ankle"] > 0 and feet is not None:
-            stiffness = p["ankle_stiffness"]
-            on_acceleration.append(
-                compute_point_from_com_objective(
-                    [jacobian[:3] for jacobian in terms.support_jacobians],
-                    [drift[:3] for drift in terms.support_drifts],
-                    terms.position_contact_frames_in_world,
-                    v,
-                    momentum,
-                    mass,
-                    com,
-                    feet.offsets_in_world,
-                    stiffness,
-                    critical_damping(stiffness, ratio),
-                    p["weight_ankle"],
-                    rotations=[self._data.oMf[c.frame_id].rotation for c in self.robot.contacts],
-                    reference_rotations=feet.rotations_in_world,
-                    angular_jacobians=[jacobian[3:] for jacobian in terms.support_jacobians],
-                    angular_drifts=[drift[3:] for drift in terms.support_drifts],
-                )
-            )
-        swing = None if targets is None else targets.swing
-        if p["weight_swing"] > 0 and swing is not None:
-            foot = swing.contact
-            stiffness = swing.stiffness
-            on_acceleration.append(
-                compute_swing_objective(
-                    swing,
-                    control_input.time_s,
-                    terms.support_jacobians[foot],
-                    terms.support_drifts[foot],
-                    terms.position_contact_frames_in_world[foot],
-                    self._data.oMf[self.robot.contacts[foot].frame_id].rotation,
-                    v,
-                    stiffness,
-                    critical_damping(stiffness, ratio),
-                    p["weight_swing"],
-                )
-            )
+        blocks = {"acceleration": layout.acceleration, "torque": layout.torque}
         objectives = {
             "dynamics": Term(layout.equations_of_motion(terms), slice(0, layout.size), 1.0, True),
             **{
-                o.name: Term(
-                    o,
-                    layout.acceleration,
-                    weight,
-                    weight > 0,
-                    layout.contact_row_basis() if o.name == "contact" else None,
+                solved.name: Term(
+                    solved.objective,
+                    blocks[solved.slot.task.block],
+                    solved.slot.weight if solved.slot.task.uniform else None,
+                    solved.active,
+                    solved.slot.task.row_basis(tick),
                 )
-                for o, weight in ((o, float(p[f"weight_{o.name}"])) for o in on_acceleration)
+                for solved in self.tasks.solve_rows(tick)
             },
             "forces": self._least_forces(layout),
-            "torque": self._least_torque(layout),
         }
+        unknown = np.full(3, np.nan)
         desired_rates = {
-            "linear_momentum_rate": desired_linear_rate,
-            "angular_momentum_rate": desired_angular_rate,
+            "linear_momentum_rate": tick.reports.get("linear_momentum_rate", unknown),
+            "angular_momentum_rate": tick.reports.get("angular_momentum_rate", unknown),
         }
         return objectives, desired_rates
 
@@ -449,22 +346,6 @@ class PrioritizedController(Controller):
         if term is None:
             term = Term(layout.least_forces(), layout.force, 1.0, True)
             self._forces_cache[layout.nl] = term
-        return term
-
-    def _least_torque(self, layout: PrioritizedLayout) -> Term:
-        """``torque`` over the ``τ`` block (eq. 15), until the parameters change."""
-        term = self._derived.get("torque")
-        if term is None:
-            p = self.in_force()
-            selection = np.asarray(p["torque_selection"], dtype=float)
-            weight = float(p["weight_torque"])
-            term = Term(
-                layout.least_torque(selection, weight),
-                layout.torque,
-                None,
-                weight > 0 and bool(np.any(selection > 0)),
-            )
-            self._derived["torque"] = term
         return term
 
     def _output(
