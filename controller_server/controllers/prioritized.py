@@ -80,18 +80,9 @@ from controller_server.solvers.prioritized import (
     solve_prioritized,
 )
 from controller_server.tasks import (
-    AngularMomentumTask,
-    AnkleTask,
-    ComHeightTask,
-    ComTask,
-    ContactTask,
     HeightTarget,
-    PoseTask,
-    SwingTask,
     TaskStack,
     Tick,
-    TorqueTask,
-    TrunkTask,
 )
 
 __all__ = ["PrioritizedController", "friction_cone_basis"]
@@ -116,19 +107,8 @@ class PrioritizedController(Controller):
         self._height = HeightTarget()
         self.tasks = TaskStack()
         """The objectives below the equations of motion and above ``forces``, by name."""
-        for task in (
-            ContactTask(),
-            ComTask(self._height),
-            ComHeightTask(self._height),
-            AngularMomentumTask(),
-            PoseTask(),
-            TrunkTask(),
-            AnkleTask(),
-            SwingTask(),
-            TorqueTask(),
-        ):
-            level, weight, _ = OBJECTIVES[task.name]
-            self.tasks.add(task, weight, level)
+        for entry in OBJECTIVES.values():
+            self.tasks.add(entry.make(self._height), entry.weight, entry.level)
         self._height_changes_seen = 0  # the behaviour's requests of a new CM height so far
         super().__init__(robot, params)
 

@@ -8,33 +8,89 @@ contacts, and the solver's settings.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import NamedTuple
+
 from controller_server.behaviors import behavior_parameters
 from controller_server.controllers.base import CONTACT_PARAMETERS, ParamSpec
 from controller_server.controllers.prioritized_layout import DEFAULT_LIMIT_HORIZON_S
 from controller_server.solvers.prioritized import QP_TIME_BUDGET_S
+from controller_server.tasks import (
+    AngularMomentumTask,
+    AnkleTask,
+    ComHeightTask,
+    ComTask,
+    ContactTask,
+    HeightTarget,
+    PoseTask,
+    SwingTask,
+    Task,
+    TorqueTask,
+    TrunkTask,
+)
 
-__all__ = ["OBJECTIVES", "PRIORITIZED_PARAMETERS"]
+__all__ = ["OBJECTIVES", "PRIORITIZED_PARAMETERS", "TaskEntry"]
 
-OBJECTIVES: dict[str, tuple[int, float, str]] = {
-    "contact": (1, 1.0, "sole points toward the ground (Table 1)"),
-    "com": (2, 10.0, "CM over the centroid of the support points (Table 1, E_com∥)"),
-    "angular_momentum": (2, 10.0, "L̇_d = k_p (L_r − L) (eq. 8–9; Table 1: priority 3)"),
-    "trunk": (2, 1.0, "root (pelvis) orientation upright (cf. E_trunk of Table 2)"),
-    "pose": (2, 1.0, "rest pose of the joints (§4, E_pose; Table 1: priority 3)"),
-    "com_height": (3, 1.0, "CM height (Table 1, E_com⊥: priority 2)"),
-    "ankle": (
+
+class TaskEntry(NamedTuple):
+    """One task of the prioritized controller: default level and weight α, role, factory."""
+
+    level: int
+    weight: float
+    role: str
+    make: Callable[[HeightTarget], Task]
+
+
+OBJECTIVES: dict[str, TaskEntry] = {
+    "contact": TaskEntry(
+        1, 1.0, "sole points toward the ground (Table 1)", lambda height: ContactTask()
+    ),
+    "com": TaskEntry(
+        2,
+        10.0,
+        "CM over the centroid of the support points (Table 1, E_com∥)",
+        ComTask,
+    ),
+    "com_height": TaskEntry(3, 1.0, "CM height (Table 1, E_com⊥: priority 2)", ComHeightTask),
+    "angular_momentum": TaskEntry(
+        2,
+        10.0,
+        "L̇_d = k_p (L_r − L) (eq. 8–9; Table 1: priority 3)",
+        lambda height: AngularMomentumTask(),
+    ),
+    "pose": TaskEntry(
+        2,
+        1.0,
+        "rest pose of the joints (§4, E_pose; Table 1: priority 3)",
+        lambda height: PoseTask(),
+    ),
+    "trunk": TaskEntry(
+        2,
+        1.0,
+        "root (pelvis) orientation upright (cf. E_trunk of Table 2)",
+        lambda height: TrunkTask(),
+    ),
+    "ankle": TaskEntry(
         2,
         0.0,
         "each foot at its take-off offset from the CM in a jump's flight (E_ankle, §5)",
+        lambda height: AnkleTask(),
     ),
-    "torque": (3, 1.0, "minimum torque on `torque_selection` (eq. 15)"),
-    "swing": (
+    "swing": TaskEntry(
         2,
         10.0,
         "a walk's swing foot toward its foothold, lifted by the step height (E_swing, §6.1)",
+        lambda height: SwingTask(),
+    ),
+    "torque": TaskEntry(
+        3, 1.0, "minimum torque on `torque_selection` (eq. 15)", lambda height: TorqueTask()
     ),
 }
-"""Objective name → (default priority, default weight α, role).
+"""The controller's tasks in stack order (the order their rows are stacked in a level).
+
+Each one registration: its default priority and weight (the ``priority_<name>`` and
+``weight_<name>`` parameters) and how to make it, given the CM-height target the ``com``
+tasks share.
 
 Table 1's order (contact; CM and CM height; angular momentum and rest
 pose) is one ``set_params`` away, but it is not the default, because the
@@ -55,7 +111,7 @@ nothing: rank them at 2 (or ``pose`` at 3) to use them.
 
 
 def _priority_spec(name: str) -> ParamSpec:
-    default, _, role = OBJECTIVES[name]
+    default, role = OBJECTIVES[name].level, OBJECTIVES[name].role
     return ParamSpec(
         default, kind="int", minimum=1, maximum=10, doc=f"priority level of `{name}`: {role}"
     )
@@ -63,7 +119,7 @@ def _priority_spec(name: str) -> ParamSpec:
 
 def _weight_spec(name: str) -> ParamSpec:
     return ParamSpec(
-        OBJECTIVES[name][1],
+        OBJECTIVES[name].weight,
         minimum=0.0,
         maximum=1e6,
         doc=f"weight of `{name}` within its level: α of eq. 16 (rows × √α); 0 = off",
