@@ -28,6 +28,7 @@ from controller_server.dynamics import DynamicsTerms
 from controller_server.errors import ControllerFailed, InvalidParams
 from controller_server.models import RobotModel
 from controller_server.params import ParamSpec
+from controller_server.tasks import Tick
 from protocol.errors import did_you_mean
 
 __all__ = [
@@ -178,6 +179,8 @@ class Controller(ABC):
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self.robot = robot
+        self.gravity = float(np.linalg.norm(robot.model.gravity.linear))
+        """``‖g‖`` of the model (m/s²)."""
         self._behavior: Behavior | None = None
         self._overrides: dict[str, Any] = {}  # the behaviour's parameters, validated
         self._override_revision = -1
@@ -321,6 +324,32 @@ class Controller(ABC):
             self._in_force = None
             self._overrides_changed()
         return targets
+
+    def _tick(
+        self,
+        control_input: ControlInput,
+        terms: DynamicsTerms,
+        data: pin.Data,
+        flags: tuple[bool, ...],
+        **context: Any,
+    ) -> Tick:
+        """What the stack's tasks read this tick, with the parameters in force.
+
+        ``context``: the controller's own fields of :class:`~controller_server.tasks.Tick`
+        (a behaviour's targets, the sole points, the support polygon, the ground wrenches).
+        """
+        return Tick(
+            robot=self.robot,
+            data=data,
+            q=control_input.q,
+            v=control_input.v,
+            time_s=control_input.time_s,
+            terms=terms,
+            params=self.in_force(),
+            supports=flags,
+            gravity=self.gravity,
+            **context,
+        )
 
     def _overrides_changed(self) -> None:  # noqa: B027 (a hook: most controllers derive nothing)
         """Called when the behaviour's parameter values change (drop what was derived)."""

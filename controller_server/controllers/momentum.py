@@ -71,7 +71,6 @@ from controller_server.tasks import (
     LinearMomentumTask,
     PointTask,
     TaskStack,
-    Tick,
     TrackingTask,
 )
 
@@ -213,7 +212,6 @@ class MomentumController(Controller):
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self._data = robot.model.createData()
-        self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._tracking = TrackingTask(robot)
         self.tasks = TaskStack()
         """``tracking``, ``linear_momentum``, ``angular_momentum``, then the point targets."""
@@ -395,16 +393,11 @@ class MomentumController(Controller):
     ) -> None:
         p = self.in_force()
         self.tasks.follow(p)
-        tick = Tick(
-            robot=self.robot,
-            data=self._data,
-            q=control_input.q,
-            v=control_input.v,
-            time_s=control_input.time_s,
-            terms=terms,
-            params=p,
-            supports=flags,
-            gravity=self._gravity,
+        tick = self._tick(
+            control_input,
+            terms,
+            self._data,
+            flags,
             support_polygon_xy=polygon,
             contact_wrench_in_world=wrenches,
         )

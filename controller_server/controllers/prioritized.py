@@ -82,7 +82,6 @@ from controller_server.solvers.prioritized import (
 from controller_server.tasks import (
     HeightTarget,
     TaskStack,
-    Tick,
 )
 
 __all__ = ["PrioritizedController", "friction_cone_basis"]
@@ -103,7 +102,6 @@ class PrioritizedController(Controller):
         self._index = LayoutIndex(robot)
         self._derived: dict[str, Any] = {}  # from the parameters; cleared by set_params
         self._forces_cache: dict[int, Term] = {}
-        self._gravity = float(np.linalg.norm(robot.model.gravity.linear))
         self._height = HeightTarget()
         self.tasks = TaskStack()
         """The objectives below the equations of motion and above ``forces``, by name."""
@@ -285,19 +283,7 @@ class PrioritizedController(Controller):
         is a task of the stack (:attr:`tasks`), over the layout's ``q̈`` or ``τ`` block. The
         rates are for the diagnostics.
         """
-        tick = Tick(
-            robot=self.robot,
-            data=self._data,
-            q=control_input.q,
-            v=control_input.v,
-            time_s=control_input.time_s,
-            terms=terms,
-            params=self.in_force(),
-            supports=flags,
-            gravity=self._gravity,
-            targets=targets,
-            loaded=layout,
-        )
+        tick = self._tick(control_input, terms, self._data, flags, targets=targets, loaded=layout)
         blocks = {"acceleration": layout.acceleration, "torque": layout.torque}
         objectives = {
             "dynamics": Term(layout.equations_of_motion(terms), slice(0, layout.size), 1.0, True),

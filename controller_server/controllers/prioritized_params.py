@@ -16,9 +16,9 @@ from controller_server.controllers.base import CONTACT_PARAMETERS, ParamSpec
 from controller_server.controllers.prioritized_layout import DEFAULT_LIMIT_HORIZON_S
 from controller_server.solvers.prioritized import QP_TIME_BUDGET_S
 from controller_server.tasks import (
+    VERTICAL,
     AngularMomentumTask,
     AnkleTask,
-    ComHeightTask,
     ComTask,
     ContactTask,
     HeightTarget,
@@ -51,7 +51,12 @@ OBJECTIVES: dict[str, TaskEntry] = {
         "CM over the centroid of the support points (Table 1, E_com∥)",
         ComTask,
     ),
-    "com_height": TaskEntry(3, 1.0, "CM height (Table 1, E_com⊥: priority 2)", ComHeightTask),
+    "com_height": TaskEntry(
+        3,
+        1.0,
+        "CM height (Table 1, E_com⊥: priority 2)",
+        lambda height: ComTask(height, "com_height", VERTICAL),
+    ),
     "angular_momentum": TaskEntry(
         2,
         10.0,

@@ -11,7 +11,7 @@ from controller_server.tasks.angular_momentum import (
     AngularMomentumTask,
     CopWeightedAngularMomentumTask,
 )
-from controller_server.tasks.com import ComHeightTask, ComTask, desired_com_rate
+from controller_server.tasks.com import VERTICAL, ComTask, desired_com_rate
 from controller_server.tasks.contact import ContactTask
 from controller_server.tasks.feet import AnkleTask, SwingTask
 from controller_server.tasks.height_target import TARGET_HANDOVER_S, HeightTarget
@@ -26,9 +26,9 @@ from controller_server.tasks.tracking import TrackingTask
 __all__ = [
     "POINT_PREFIX",
     "TARGET_HANDOVER_S",
+    "VERTICAL",
     "AngularMomentumTask",
     "AnkleTask",
-    "ComHeightTask",
     "ComTask",
     "ContactTask",
     "CopWeightedAngularMomentumTask",

@@ -3,7 +3,7 @@
 Both are rows of one desired linear momentum rate (:func:`desired_com_rate`, computed once a
 tick): ``com`` its horizontal axes (Table 1, ``E_com∥``), ``com_height`` its vertical one
 (``E_com⊥``: a target objective, eq. 6–7, while a new height is reached; eq. 4 otherwise).
-Two tasks, so that each has its own weight and priority.
+Two tasks of one class (:class:`ComTask`), so that each has its own weight and priority.
 """
 
 from __future__ import annotations
@@ -16,13 +16,15 @@ from controller_server.features import (
     admissible_linear_momentum_rate,
     compute_linear_momentum_objective,
 )
+from controller_server.features.linear_momentum import HORIZONTAL
 from controller_server.features.setpoint import critical_damping, setpoint_acceleration
 from controller_server.tasks.height_target import HeightTarget
 from controller_server.tasks.task import Task, Tick
 
-__all__ = ["ComHeightTask", "ComTask", "desired_com_rate"]
+__all__ = ["VERTICAL", "ComTask", "desired_com_rate"]
 
 VERTICAL = slice(2, 3)
+"""The vertical axis: ``com_height``'s rows."""
 
 
 def desired_com_rate(tick: Tick, height: HeightTarget) -> np.ndarray | None:
@@ -75,36 +77,23 @@ def desired_com_rate(tick: Tick, height: HeightTarget) -> np.ndarray | None:
 
 
 class ComTask(Task):
-    """The CM over the centroid of the support points (Table 1, ``E_com∥``), x and y rows."""
+    """Rows of the CM's acceleration on ``axes`` toward :func:`desired_com_rate`.
 
-    def __init__(self, height: HeightTarget, name: str = "com"):
+    ``com``: x and y (Table 1, ``E_com∥``); ``com_height``: z (``E_com⊥``; eq. 6–7 on a
+    change of ``com_height``). The two share ``height`` and the tick's desired rate.
+    """
+
+    def __init__(self, height: HeightTarget, name: str = "com", axes: slice = HORIZONTAL):
         super().__init__(name)
         self.height = height
+        self.axes = axes
 
     def rows(self, tick: Tick, weight: float) -> Objective | None:
-        """Rows ``R / m_T`` toward ``ṗ_d`` on x and y; none without support."""
+        """Rows ``R / m_T`` toward ``ṗ_d`` on the task's axes; none without support."""
         desired = desired_com_rate(tick, self.height)
         if desired is None:
             return None
         terms = tick.terms
         return compute_linear_momentum_objective(
-            terms.momentum, terms.total_mass, desired, weight, name=self.name
-        )
-
-
-class ComHeightTask(Task):
-    """The CM at ``com_height`` above the ground (Table 1, ``E_com⊥``; eq. 6–7 on a change)."""
-
-    def __init__(self, height: HeightTarget, name: str = "com_height"):
-        super().__init__(name)
-        self.height = height
-
-    def rows(self, tick: Tick, weight: float) -> Objective | None:
-        """Rows ``R / m_T`` toward ``ṗ_d`` on z; none without support."""
-        desired = desired_com_rate(tick, self.height)
-        if desired is None:
-            return None
-        terms = tick.terms
-        return compute_linear_momentum_objective(
-            terms.momentum, terms.total_mass, desired, weight, axes=VERTICAL, name=self.name
+            terms.momentum, terms.total_mass, desired, weight, axes=self.axes, name=self.name
         )
