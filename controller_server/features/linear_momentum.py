@@ -31,6 +31,7 @@ from controller_server.features.objective import Objective
 from controller_server.momentum import MomentumRates
 
 __all__ = [
+    "HORIZONTAL",
     "admissible_linear_momentum_rate",
     "compute_linear_momentum_objective",
     "desired_linear_momentum_rate",
