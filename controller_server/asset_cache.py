@@ -2,9 +2,10 @@
 
 A ``hello`` may name the files of its ``model_text`` by content
 (``model_asset_hashes``) instead of sending them inline, so its size does not
-grow with the meshes. The broker (:mod:`controller_server.server`) answers
-``asset`` uploads with this cache, and a ``hello`` naming a file the client has
-not uploaded with ``ASSETS_MISSING``. The workers read the files by name from
+grow with the meshes. The broker (:mod:`controller_server.server`, through
+:mod:`controller_server.asset_requests`) answers ``asset`` uploads with this
+cache, and a ``hello`` naming a file the client has not uploaded with
+``ASSETS_MISSING``. The workers read the files by name from
 :attr:`AssetCache.directory` (:func:`read_asset`), so a file uploaded through
 the broker serves every worker.
 

@@ -1,22 +1,22 @@
 """What the broker keeps track of: where each session lives, what is in flight, its workers.
 
-A client's :class:`Route` leads to the worker holding its session; a :class:`Pending` is a
-request forwarded there and not yet answered (with the deadline it must be answered by); a
-:class:`WorkerRecord` is one worker process and its channel; a :class:`Gather` is a ``stats``
-request waiting for every worker's part. :func:`error_reply` and :func:`error_of` are the
-broker's own ``error`` replies.
+A client's :class:`Route` leads to the worker holding its session (chosen by :func:`place`);
+a :class:`Pending` is a request forwarded there and not yet answered (with the deadline it
+must be answered by); a :class:`WorkerRecord` is one worker process and its channel.
+:func:`error_reply` and :func:`error_of` are the broker's own ``error`` replies.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import subprocess
+from collections.abc import Iterable, Mapping
 
 from controller_server.worker import Channel, client_tag
 from protocol.errors import AssetsMissing, ErrorCode, ProtocolError
-from protocol.messages import Error, SessionStats
+from protocol.messages import Error
 
-__all__ = ["Gather", "Pending", "Route", "WorkerRecord", "error_of", "error_reply"]
+__all__ = ["Pending", "Route", "WorkerRecord", "error_of", "error_reply", "place"]
 
 
 @dataclasses.dataclass(slots=True)
@@ -72,15 +72,38 @@ class WorkerRecord:
         return self.channel.fileno()
 
 
-@dataclasses.dataclass
-class Gather:
-    """A ``stats`` request waiting for the workers' answers."""
+def place(
+    workers: Iterable[WorkerRecord],
+    routes: Mapping[bytes, Route],
+    client: str,
+    workers_per_client: int,
+) -> WorkerRecord:
+    """The worker for a new session of ``client`` (``routes``: every route, by routing id).
 
-    identity: bytes
-    seq: int
-    deadline_s: float
-    waiting: set[bytes]
-    sessions: list[SessionStats] = dataclasses.field(default_factory=list)
+    A client's sessions occupy at most ``workers_per_client`` workers (all but
+    one by default): a client that opens a session per worker and floods them
+    would otherwise leave a client arriving later only workers where it waits
+    behind a tick of the flood's (non-preemptive), whereas on a worker of its own
+    the operating system shares the cores between the processes. Within that,
+    the worker with the fewest other clients' sessions, then the fewest
+    sessions; ready workers first (a replacement still warming up gets the
+    request queued).
+    """
+    workers = list(workers)
+    others: dict[bytes, int] = {}
+    held = set()
+    for worker in workers:
+        clients = [route.client for identity in worker.routes if (route := routes.get(identity))]
+        others[worker.identity] = sum(c != client for c in clients)
+        if client in clients:
+            held.add(worker.identity)
+    candidates = [
+        worker for worker in workers if len(held) < workers_per_client or worker.identity in held
+    ]
+    return min(
+        candidates,
+        key=lambda w: (not w.ready, others[w.identity], len(w.routes), len(w.pending)),
+    )
 
 
 def error_reply(

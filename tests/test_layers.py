@@ -41,8 +41,9 @@ LAYERS: dict[str, list[tuple[str, ...]]] = {
         ("session",),
         ("session_table",),
         ("worker",),
-        ("routing",),  # what the broker tracks
+        ("routing",),  # what the broker tracks, where a new session goes
         ("broker_setup",),  # how it starts: CURVE, worker processes
+        ("worker_pool", "stats_gather", "asset_requests"),  # its workers, stats, uploads
         ("server",),  # … the broker
         ("cli",),  # the composition root
     ],
