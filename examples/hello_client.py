@@ -15,7 +15,9 @@ from protocol import State
 
 def main(endpoint: str) -> None:
     """Handshake, five ticks of the standing pose, print torques and ground force."""
-    with ControllerClient(endpoint, timeout_s=5.0) as client:
+    # 30 s: the first hello may reach a server that was just started (`poise serve &`),
+    # whose workers are still loading; a loaded machine can take more than 5 s for that.
+    with ControllerClient(endpoint, timeout_s=30.0) as client:
         welcome = client.connect("thesis_humanoid", params={"stiffness": 100.0})
         print(f"{welcome.model_name}: {len(welcome.joints)} joints, {welcome.total_mass:.1f} kg")
         nv = sum(joint.nv for joint in welcome.joints)
