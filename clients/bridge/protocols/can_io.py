@@ -103,29 +103,38 @@ class CanChannel:
             if self._recv(0.0) is None:
                 return
 
+    def _read_until(self, take: Callable[[can.Message], bool]) -> None:
+        """Hand each frame to ``take`` until it says every answer is in, or the timeout passed."""
+        deadline = time.monotonic() + self.reply_timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0.0:
+                return
+            message = self._recv(remaining)
+            if message is None or take(message):
+                return
+
     def _gather(
         self, expected: Iterable[int], parse: Callable[[can.Message], tuple[int, _T] | None]
     ) -> dict[int, _T]:
         """Read until every expected id answered or the timeout passed (newest answer kept)."""
         pending = set(expected)
         answers: dict[int, _T] = {}
-        deadline = time.monotonic() + self.reply_timeout_s
-        while pending:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0.0:
-                break
-            message = self._recv(remaining)
-            if message is None:
-                break
+
+        def take(message: can.Message) -> bool:
             if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
-                continue
+                return False
             try:
                 answer = parse(message)
             except MalformedFrame:
-                continue  # counts as nothing: the actuator reads as silent if no valid answer
+                return False  # counts as nothing: the actuator reads as silent if no valid answer
             if answer is not None and answer[0] in answers.keys() | pending:
                 answers[answer[0]] = answer[1]
                 pending.discard(answer[0])
+            return not pending
+
+        if pending:
+            self._read_until(take)
         return answers
 
     def _round_trip(

@@ -285,18 +285,16 @@ class ODriveBus(CanChannel):
                 frames.append(make_request(node, Command.GET_TEMPERATURE))
         self._send(frames)
         replies: dict[int, dict[int, object]] = {node: {} for node in node_ids}
-        deadline = time.monotonic() + self.reply_timeout_s
         pending = set(node_ids)
-        while pending:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0.0:
-                break
-            message = self._recv(remaining)
-            if message is None:
-                break
+
+        def take(message: can.Message) -> bool:
             node = self._take(message, replies)
             if node in pending and all(command in replies[node] for command in wanted):
                 pending.discard(node)
+            return not pending
+
+        if pending:
+            self._read_until(take)
         return {node: self._feedback(node, replies[node]) for node in node_ids}
 
     def _take(self, message: can.Message, replies: dict[int, dict[int, object]] | None) -> int:
