@@ -49,6 +49,7 @@ import zmq
 from controller_server.asset_cache import AssetCache
 from controller_server.asset_requests import check_assets, receive_asset
 from controller_server.broker_setup import ServerStartError, enable_curve
+from controller_server.compiled import CompiledCoreUnavailable, load_core
 from controller_server.config import ServeConfig
 from controller_server.memory import return_large_buffers_to_the_system
 from controller_server.routing import Pending, Route, WorkerRecord, error_of, error_reply, place
@@ -83,10 +84,15 @@ class ControllerServer:
         config: Endpoints, workers, deadlines, caps, model directories, keys.
 
     Raises:
-        ServerStartError: A key file is unreadable or an endpoint cannot be bound.
+        ServerStartError: A key file is unreadable, an endpoint cannot be bound, or the
+            compiled core (the controllers' default ``kernel``) cannot be imported.
     """
 
     def __init__(self, config: ServeConfig):
+        try:  # a broken build fails here, in one line, not at a session's first tick
+            load_core()
+        except CompiledCoreUnavailable as error:
+            raise ServerStartError(str(error)) from None
         return_large_buffers_to_the_system()  # a long message's buffers leave with it
         self.config = config
         self.stop_event = threading.Event()

@@ -1,11 +1,14 @@
 """`poise list`: one line per scenario, model, controller, joint or body."""
 
+import importlib.machinery
+import importlib.util
 import subprocess
 import sys
 
 import mujoco
 import pytest
 
+from clients.physics import model_file
 from clients.physics.model_file import resolve_model_path
 from clients.sim.scenario import SCENARIO_DIR
 from controller_server.cli import main
@@ -16,6 +19,16 @@ from controller_server.models import BUILTIN_MODELS, load_robot_model
 def listed(capsys, *arguments: str) -> list[str]:
     assert main(["list", *arguments]) == 0
     return capsys.readouterr().out.splitlines()
+
+
+def test_the_models_are_found_in_a_package_over_two_directories(tmp_path, monkeypatch):
+    """An editable install: the compiled core in site-packages (listed first), the data here."""
+    spec = importlib.util.find_spec("controller_server")
+    split = importlib.machinery.ModuleSpec("controller_server", None, is_package=True)
+    split.submodule_search_locations = [str(tmp_path), *spec.submodule_search_locations]
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: split)
+    assert model_file.builtin_model_names() == sorted(BUILTIN_MODELS)
+    assert model_file.builtin_model_path("dino_biped") == BUILTIN_MODELS["dino_biped"]
 
 
 def test_scenarios_one_line_each_with_its_description(capsys):

@@ -116,6 +116,7 @@ def test_hello_client_example_runs(server):
         ("record.py", ["--blocks", "2", "--block-ticks", "50"]),
         ("bridge.py", ["--count", "40", "--chunks", "2"]),
         ("estimator.py", ["--ticks", "60", "--chunks", "2"]),
+        ("dynamics_core.py", ["--calls", "200", "--chunks", "2"]),
     ],
 )
 def test_benchmarks_run_and_print_ratios(script, args):

@@ -29,6 +29,7 @@ LAYERS: dict[str, list[tuple[str, ...]]] = {
         ("files",),  # which files the server may read
         ("models",),  # robot
         ("momentum", "balance_points"),  # centroidal momentum rates, COP and CMP
+        ("compiled",),  # the compiled core (C++, controller_server/core/): imported, checked
         ("dynamics",),  # one state's M, h, Jacobians, drifts
         ("constraints",),
         ("features",),  # each objective's rows over q̈

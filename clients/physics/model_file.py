@@ -51,7 +51,13 @@ def _builtin_model_dir() -> Path:
     spec = importlib.util.find_spec("controller_server")
     if spec is None or not spec.submodule_search_locations:
         raise FileNotFoundError("the controller_server package is not installed")
-    return Path(next(iter(spec.submodule_search_locations))) / "models" / "data"
+    locations = [Path(location) for location in spec.submodule_search_locations]
+    # An editable install spans two directories: the compiled core's in site-packages (first)
+    # and the clone's, with the sources and their data.
+    return next(
+        (where / "models" / "data" for where in locations if (where / "models" / "data").is_dir()),
+        locations[0] / "models" / "data",
+    )
 
 
 def builtin_model_names() -> list[str]:

@@ -10,6 +10,9 @@ Every controller hosts behaviours the same way (:meth:`Controller._host`): the o
 ``behavior`` parameter names observes each tick and answers its
 :class:`~controller_server.behaviors.Targets`, whose parameter values hold over the
 client's for that tick only (:meth:`Controller.in_force`).
+
+Every controller computes its dynamics terms the same way (:meth:`Controller._dynamics_terms`):
+by the compiled core or by the Python specification, as its ``kernel`` parameter says.
 """
 
 from __future__ import annotations
@@ -24,7 +27,12 @@ import numpy as np
 import pinocchio as pin
 
 from controller_server.behaviors import BEHAVIORS, Behavior, Observation, Targets
-from controller_server.dynamics import DynamicsTerms
+from controller_server.dynamics import (
+    KERNELS,
+    CompiledDynamics,
+    DynamicsTerms,
+    compute_dynamics_terms,
+)
 from controller_server.errors import ControllerFailed, InvalidParams
 from controller_server.models import RobotModel
 from controller_server.params import ParamSpec
@@ -33,6 +41,7 @@ from protocol.errors import did_you_mean
 
 __all__ = [
     "CONTACT_PARAMETERS",
+    "KERNEL_PARAMETERS",
     "ControlInput",
     "ControlOutput",
     "Controller",
@@ -128,6 +137,19 @@ CONTACT_PARAMETERS: dict[str, ParamSpec] = {
 }
 """The ground and the contacts, the same for every controller."""
 
+KERNEL_PARAMETERS: dict[str, ParamSpec] = {
+    "kernel": ParamSpec(
+        "python",
+        kind="choice",
+        choices=KERNELS,
+        doc="dynamics terms (M, h, Jacobians, drifts, momentum) by the compiled core or by "
+        "the Python specification (controller_server.dynamics): equal to rounding, the "
+        "compiled about 3× faster (bench/dynamics_core.py); python stays the default until "
+        "two simulated runs that rounding changes are settled (CHANGELOG)",
+    ),
+}
+"""How every controller computes its dynamics terms."""
+
 
 @dataclass(frozen=True)
 class ControlInput:
@@ -179,6 +201,9 @@ class Controller(ABC):
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self.robot = robot
+        self._data = robot.model.createData()
+        """This session's Pinocchio data: after :meth:`_dynamics_terms`, the state's kinematics."""
+        self._compiled: CompiledDynamics | None = None  # the compiled core, at its first tick
         self.gravity = float(np.linalg.norm(robot.model.gravity.linear))
         """``‖g‖`` of the model (m/s²)."""
         self._behavior: Behavior | None = None
@@ -324,6 +349,23 @@ class Controller(ABC):
             self._in_force = None
             self._overrides_changed()
         return targets
+
+    def _dynamics_terms(self, control_input: ControlInput) -> DynamicsTerms:
+        """The state's dynamics terms by the ``kernel`` in force (the compiled core by default).
+
+        Either way ``self._data`` is left with the state's kinematics (frame placements, joint
+        Jacobians, velocities and accelerations at ``q̈ = 0``), which behaviours and tasks read.
+
+        Raises:
+            CompiledCoreUnavailable: ``kernel`` is ``"compiled"`` and the core is not built (or
+                was built for another Pinocchio); never a silent fall back to Python.
+        """
+        q, v = control_input.q, control_input.v
+        if self.in_force()["kernel"] == "python":
+            return compute_dynamics_terms(self.robot, self._data, q, v)
+        if self._compiled is None:
+            self._compiled = CompiledDynamics(self.robot)
+        return self._compiled.compute(self._data, q, v)
 
     def _tick(
         self,

@@ -37,6 +37,7 @@ from controller_server.behaviors import behavior_parameters
 from controller_server.constraints import compute_support_equalities
 from controller_server.controllers.base import (
     CONTACT_PARAMETERS,
+    KERNEL_PARAMETERS,
     ControlInput,
     Controller,
     ControllerFailed,
@@ -52,7 +53,6 @@ from controller_server.dynamics import (
     DynamicsTerms,
     centroidal_motion,
     compute_contact_geometry,
-    compute_dynamics_terms,
 )
 from controller_server.errors import InvalidParams
 from controller_server.features import (
@@ -170,6 +170,7 @@ class MomentumController(Controller):
             doc="inverse dynamics with distributed forces, or the state's measured wrenches",
         ),
         **CONTACT_PARAMETERS,
+        **KERNEL_PARAMETERS,
         **behavior_parameters("momentum"),
         "optimizer_period_ticks": ParamSpec(
             1,
@@ -211,7 +212,6 @@ class MomentumController(Controller):
     }
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
-        self._data = robot.model.createData()
         self._tracking = TrackingTask(robot)
         self.tasks = TaskStack()
         """``tracking``, ``linear_momentum``, ``angular_momentum``, then the point targets."""
@@ -339,7 +339,7 @@ class MomentumController(Controller):
                 geometry.position_contact_frames_in_world,
             )
         if dynamics is None:
-            terms = compute_dynamics_terms(robot, self._data, q, v)
+            terms = self._dynamics_terms(control_input)
             check_finite_dynamics(terms)
             points, origins = terms.position_points_in_world, terms.position_contact_frames_in_world
             if run_optimizer:

@@ -72,7 +72,7 @@ from controller_server.controllers.prioritized_layout import (
 )
 from controller_server.controllers.prioritized_levels import Term, normalized_level, term_residual
 from controller_server.controllers.prioritized_params import OBJECTIVES, PRIORITIZED_PARAMETERS
-from controller_server.dynamics import DynamicsTerms, compute_dynamics_terms
+from controller_server.dynamics import DynamicsTerms
 from controller_server.inverse_dynamics import wrenches_from_point_forces
 from controller_server.models import RobotModel
 from controller_server.solvers.prioritized import (
@@ -98,7 +98,6 @@ class PrioritizedController(Controller):
     PARAMETERS: ClassVar[dict[str, ParamSpec]] = PRIORITIZED_PARAMETERS
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
-        self._data = robot.model.createData()
         self._index = LayoutIndex(robot)
         self._derived: dict[str, Any] = {}  # from the parameters; cleared by set_params
         self._forces_cache: dict[int, Term] = {}
@@ -164,7 +163,7 @@ class PrioritizedController(Controller):
             raise ControllerFailed(f"a linear solve failed at this state: {error}") from error
 
     def _compute(self, control_input: ControlInput) -> ControlOutput:
-        terms = compute_dynamics_terms(self.robot, self._data, control_input.q, control_input.v)
+        terms = self._dynamics_terms(control_input)
         check_finite_dynamics(terms)
         targets = self._host(control_input, terms, self._data)
         if targets is not None and targets.com_height_changes != self._height_changes_seen:

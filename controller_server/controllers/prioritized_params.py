@@ -12,7 +12,7 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 from controller_server.behaviors import behavior_parameters
-from controller_server.controllers.base import CONTACT_PARAMETERS, ParamSpec
+from controller_server.controllers.base import CONTACT_PARAMETERS, KERNEL_PARAMETERS, ParamSpec
 from controller_server.controllers.prioritized_layout import DEFAULT_LIMIT_HORIZON_S
 from controller_server.solvers.prioritized import QP_TIME_BUDGET_S
 from controller_server.tasks import (
@@ -213,6 +213,7 @@ PRIORITIZED_PARAMETERS: dict[str, ParamSpec] = {
         1.0, minimum=0.0, maximum=100.0, doc="ζ of every setpoint: k_v = 2 ζ √k_p (eq. 4)"
     ),
     **CONTACT_PARAMETERS,
+    **KERNEL_PARAMETERS,
     "non_penetration": ParamSpec(
         True, kind="bool", doc="enforce eq. 26 at the points carrying force"
     ),
