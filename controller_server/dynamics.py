@@ -19,7 +19,7 @@ centroidal momentum rate at zero acceleration (a kinematics pass), then reads of
 
 :func:`compute_dynamics_terms` is the executable specification. The controllers compute
 the same terms by the compiled core (:class:`CompiledDynamics`, C++ in
-``controller_server/core/``: the same Pinocchio calls in the same order, 3–3.5× faster)
+``controller_server/core/``: the same Pinocchio calls in the same order, about 3× faster)
 when their parameter ``kernel`` is ``"compiled"`` (:data:`KERNELS`; ``"python"`` is the
 default for now); the two agree to rounding (``tests/controller_server/test_compiled_core.py``).
 
