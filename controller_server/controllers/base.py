@@ -36,7 +36,7 @@ from controller_server.dynamics import (
 from controller_server.errors import ControllerFailed, InvalidParams
 from controller_server.models import RobotModel
 from controller_server.params import ParamSpec
-from controller_server.tasks import Tick
+from controller_server.tasks import TaskStack, Tick
 from protocol.errors import did_you_mean
 
 __all__ = [
@@ -194,10 +194,17 @@ class ControlOutput:
 
 
 class Controller(ABC):
-    """A whole-body controller for one robot (one per session)."""
+    """A whole-body controller for one robot (one per session).
+
+    A subclass fills :attr:`tasks` before calling ``super().__init__``; the base keeps the
+    tasks' weights and levels equal to the parameters in force (:meth:`_tick`) and has them
+    forget what they derived whenever those parameters change.
+    """
 
     name: ClassVar[str]
     PARAMETERS: ClassVar[dict[str, ParamSpec]]
+    tasks: TaskStack
+    """The controller's objectives by name, with their weights and levels."""
 
     def __init__(self, robot: RobotModel, params: Mapping[str, Any] | None = None):
         self.robot = robot
@@ -249,6 +256,7 @@ class Controller(ABC):
         validated = {key: self._validate(key, value) for key, value in params.items()}
         self._params.update(validated)
         self._in_force = None
+        self.tasks.reset()
         if "behavior" in params:  # ends the behaviour under way: the next tick starts anew
             self._behavior, self._overrides, self._override_revision = None, {}, -1
 
@@ -312,14 +320,13 @@ class Controller(ABC):
         """``balance``, or the state of the behaviour under way (``stand``, ``compress`` …)."""
         return "balance" if self._behavior is None else self._behavior.state
 
-    def _host(
-        self, control_input: ControlInput, terms: DynamicsTerms, data: pin.Data
-    ) -> Targets | None:
+    def _host(self, control_input: ControlInput, terms: DynamicsTerms) -> Targets | None:
         """Run the behaviour ``behavior`` names for this tick (``None``: none, or ``balance``).
 
         It is created at its first tick; its parameter values are validated as a
         ``set_params`` would validate them (once per revision), and hold over the client's in
-        :meth:`in_force` until it changes them. ``data`` holds this state's frame placements.
+        :meth:`in_force` until it changes them. It reads the state's frame placements from
+        ``self._data`` (filled by :meth:`_dynamics_terms`).
 
         Raises:
             InvalidParams: The behaviour set a value its host refuses.
@@ -338,7 +345,7 @@ class Controller(ABC):
             joint_position=control_input.q[7:],
             orientation_base_in_world_xyzw=control_input.q[3:7],
             orientation_contact_frames_in_world=np.array(
-                [data.oMf[c.frame_id].rotation for c in self.robot.contacts]
+                [self._data.oMf[c.frame_id].rotation for c in self.robot.contacts]
             ),
             ground_height=self._params["ground_height"],
         )
@@ -347,11 +354,12 @@ class Controller(ABC):
             self._overrides = {key: self._validate(key, v) for key, v in targets.params.items()}
             self._override_revision = targets.revision
             self._in_force = None
+            self.tasks.reset()
             self._overrides_changed()
         return targets
 
     def _dynamics_terms(self, control_input: ControlInput) -> DynamicsTerms:
-        """The state's dynamics terms by the ``kernel`` in force (the compiled core by default).
+        """The state's dynamics terms by the ``kernel`` in force (Python by default, for now).
 
         Either way ``self._data`` is left with the state's kinematics (frame placements, joint
         Jacobians, velocities and accelerations at ``q̈ = 0``), which behaviours and tasks read.
@@ -371,23 +379,26 @@ class Controller(ABC):
         self,
         control_input: ControlInput,
         terms: DynamicsTerms,
-        data: pin.Data,
         flags: tuple[bool, ...],
         **context: Any,
     ) -> Tick:
         """What the stack's tasks read this tick, with the parameters in force.
 
-        ``context``: the controller's own fields of :class:`~controller_server.tasks.Tick`
-        (a behaviour's targets, the sole points, the support polygon, the ground wrenches).
+        The tasks' weights and levels follow those parameters first (``weight_<name>``,
+        ``priority_<name>``). ``context``: the controller's own fields of
+        :class:`~controller_server.tasks.Tick` (a behaviour's targets, the sole points, the
+        support polygon, the ground wrenches).
         """
+        params = self.in_force()
+        self.tasks.follow(params)
         return Tick(
             robot=self.robot,
-            data=data,
+            data=self._data,
             q=control_input.q,
             v=control_input.v,
             time_s=control_input.time_s,
             terms=terms,
-            params=self.in_force(),
+            params=params,
             supports=flags,
             gravity=self.gravity,
             **context,

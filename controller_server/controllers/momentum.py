@@ -227,9 +227,6 @@ class MomentumController(Controller):
 
     # Parameters -----------------------------------------------------------------
 
-    def _overrides_changed(self) -> None:
-        self.tasks.reset()
-
     def default_value(self, key: str) -> Any:
         """Joint weights default to ones (the rest: :meth:`Controller.default_value`)."""
         if key == "joint_weights":
@@ -265,7 +262,6 @@ class MomentumController(Controller):
         if "clip" in rest and isinstance(rest["clip"], str):
             clip = load_motion_clip(rest["clip"], self.robot) if rest["clip"] else None
         super().set_params(rest)
-        self.tasks.reset()
         self._tracking.clip = clip
         for name, target in validated_points.items():
             if target is None:
@@ -344,7 +340,7 @@ class MomentumController(Controller):
             points, origins = terms.position_points_in_world, terms.position_contact_frames_in_world
             if run_optimizer:
                 # A behaviour runs at the optimizer's rate: its targets steer the next solve.
-                self._host(control_input, terms, self._data)
+                self._host(control_input, terms)
                 p = self.in_force()
                 polygon = _support_polygon(points, flags)
                 # β_ba's p and g (eq. 5.17) come from the body's measured ground wrench
@@ -392,11 +388,9 @@ class MomentumController(Controller):
         polygon: np.ndarray,
     ) -> None:
         p = self.in_force()
-        self.tasks.follow(p)
         tick = self._tick(
             control_input,
             terms,
-            self._data,
             flags,
             support_polygon_xy=polygon,
             contact_wrench_in_world=wrenches,

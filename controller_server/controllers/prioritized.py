@@ -124,7 +124,6 @@ class PrioritizedController(Controller):
         old_height = self._params.get("com_height")
         super().set_params(params)
         self._derived = {}
-        self.tasks.reset()
         if old_height is not None and self._params["com_height"] != old_height:
             self._height.restart()
         if "behavior" in params:
@@ -132,7 +131,6 @@ class PrioritizedController(Controller):
 
     def _overrides_changed(self) -> None:
         self._derived = {}
-        self.tasks.reset()
 
     def _validate(self, key: str, value: Any) -> Any:
         validated = super()._validate(key, value)
@@ -165,7 +163,7 @@ class PrioritizedController(Controller):
     def _compute(self, control_input: ControlInput) -> ControlOutput:
         terms = self._dynamics_terms(control_input)
         check_finite_dynamics(terms)
-        targets = self._host(control_input, terms, self._data)
+        targets = self._host(control_input, terms)
         if targets is not None and targets.com_height_changes != self._height_changes_seen:
             self._height_changes_seen = targets.com_height_changes
             self._height.restart()
@@ -180,7 +178,6 @@ class PrioritizedController(Controller):
             p["ground_height"],
             p["contact_distance"],
         )
-        self.tasks.follow(p)
         objectives, desired_rates = self._objectives(control_input, terms, layout, flags, targets)
         D, f = layout.inequalities(
             control_input.q, control_input.v, p["non_penetration"], p["joint_limit_horizon_s"]
@@ -282,7 +279,7 @@ class PrioritizedController(Controller):
         is a task of the stack (:attr:`tasks`), over the layout's ``q̈`` or ``τ`` block. The
         rates are for the diagnostics.
         """
-        tick = self._tick(control_input, terms, self._data, flags, targets=targets, loaded=layout)
+        tick = self._tick(control_input, terms, flags, targets=targets, loaded=layout)
         blocks = {"acceleration": layout.acceleration, "torque": layout.torque}
         objectives = {
             "dynamics": Term(layout.equations_of_motion(terms), slice(0, layout.size), 1.0, True),
