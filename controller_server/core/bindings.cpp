@@ -20,6 +20,8 @@
 
 #include <pinocchio/config.hpp>
 
+#include "bind_parts.hpp"
+#include "bind_terms.hpp"
 #include "dynamics_core.hpp"
 
 namespace nb = nanobind;
@@ -172,4 +174,7 @@ NB_MODULE(_core, m) {
         for (const ContactSpec& contact : core.contacts()) ids.push_back(contact.frame_id);
         return ids;
       });
+
+  // The compiled tick's steps, one binding file each (bind_parts.hpp).
+  poise::bind_parts(m);
 }

@@ -1,0 +1,16 @@
+// The compiled tick's steps, each bound in its own bind_<step>.cpp so that a step, its
+// bindings and its agreement test change together. NB_MODULE (bindings.cpp) calls
+// bind_parts once; add a step by declaring its bind_<step> here and calling it below.
+#pragma once
+
+#include <nanobind/nanobind.h>
+
+namespace poise {
+
+// Each binds its step's functions and classes into `m` (controller_server._core).
+
+inline void bind_parts(nanobind::module_& m) {
+  (void)m;
+}
+
+}  // namespace poise
