@@ -93,6 +93,10 @@ class DynamicsCore {
   DynamicsCore clone() const { return DynamicsCore(model_, contacts_); }
 
   const Model& model() const { return *model_; }
+  // This workspace's Pinocchio data: after compute(), the state's kinematics (joint and
+  // frame placements, velocities, accelerations at q̈ = 0, joint Jacobians).
+  const Data& data() const { return data_; }
+  Data& data() { return data_; }  // frame Jacobians write the frame's placement
   const std::vector<ContactSpec>& contacts() const { return contacts_; }
   void check_sizes(const Eigen::Ref<const Eigen::VectorXd>& q,
                    const Eigen::Ref<const Eigen::VectorXd>& v) const;
