@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cache
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -50,6 +51,7 @@ __all__ = [
     "centroidal_motion",
     "compute_contact_geometry",
     "compute_dynamics_terms",
+    "new_core",
     "point_kinematics",
 ]
 
@@ -241,6 +243,19 @@ def compute_dynamics_terms(
     )
 
 
+def new_core(robot: RobotModel) -> Any:
+    """A ``controller_server._core.Core`` for ``robot``: its model and contacts, a workspace.
+
+    Raises:
+        CompiledCoreUnavailable: The core is not built or was built for another Pinocchio.
+    """
+    return load_core().Core(
+        robot.model.saveToString(),
+        [contact.frame_id for contact in robot.contacts],
+        [np.ascontiguousarray(c.points_in_frame, dtype=float) for c in robot.contacts],
+    )
+
+
 class CompiledDynamics:
     """:func:`compute_dynamics_terms` by the compiled core, for one robot (one per controller).
 
@@ -256,11 +271,7 @@ class CompiledDynamics:
 
     def __init__(self, robot: RobotModel):
         self.robot = robot
-        self._core = load_core().Core(
-            robot.model.saveToString(),
-            [contact.frame_id for contact in robot.contacts],
-            [np.ascontiguousarray(c.points_in_frame, dtype=float) for c in robot.contacts],
-        )
+        self._core = new_core(robot)
         self._zero_acceleration = np.zeros(robot.model.nv)
 
     def compute(self, data: pin.Data, q: np.ndarray, v: np.ndarray) -> DynamicsTerms:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -320,13 +320,15 @@ class Controller(ABC):
         """``balance``, or the state of the behaviour under way (``stand``, ``compress`` …)."""
         return "balance" if self._behavior is None else self._behavior.state
 
-    def _host(self, control_input: ControlInput, terms: DynamicsTerms) -> Targets | None:
+    def _host(
+        self, control_input: ControlInput, observe: Callable[[], Observation]
+    ) -> Targets | None:
         """Run the behaviour ``behavior`` names for this tick (``None``: none, or ``balance``).
 
         It is created at its first tick; its parameter values are validated as a
         ``set_params`` would validate them (once per revision), and hold over the client's in
-        :meth:`in_force` until it changes them. It reads the state's frame placements from
-        ``self._data`` (filled by :meth:`_dynamics_terms`).
+        :meth:`in_force` until it changes them. ``observe`` gives what it observes of the
+        state (:meth:`_observation`, or the compiled tick's), called only when a behaviour runs.
 
         Raises:
             InvalidParams: The behaviour set a value its host refuses.
@@ -336,20 +338,7 @@ class Controller(ABC):
             return None
         if self._behavior is None:
             self._behavior = BEHAVIORS[name](self.robot)
-        observation = Observation(
-            time_s=control_input.time_s,
-            position_com_in_world=terms.position_com_in_world,
-            velocity_com_in_world=terms.momentum.linear_momentum / terms.total_mass,
-            touching=control_input.contact_flags,
-            position_contact_frames_in_world=terms.position_contact_frames_in_world,
-            joint_position=control_input.q[7:],
-            orientation_base_in_world_xyzw=control_input.q[3:7],
-            orientation_contact_frames_in_world=np.array(
-                [self._data.oMf[c.frame_id].rotation for c in self.robot.contacts]
-            ),
-            ground_height=self._params["ground_height"],
-        )
-        targets = self._behavior.update(observation, self.in_force())
+        targets = self._behavior.update(observe(), self.in_force())
         if targets.revision != self._override_revision:
             self._overrides = {key: self._validate(key, v) for key, v in targets.params.items()}
             self._override_revision = targets.revision
@@ -357,6 +346,40 @@ class Controller(ABC):
             self.tasks.reset()
             self._overrides_changed()
         return targets
+
+    def _observation(self, control_input: ControlInput, terms: DynamicsTerms) -> Observation:
+        """What a behaviour observes: the state, its terms, frame placements of ``self._data``."""
+        return self.observation(
+            control_input,
+            position_com_in_world=terms.position_com_in_world,
+            velocity_com_in_world=terms.momentum.linear_momentum / terms.total_mass,
+            position_contact_frames_in_world=terms.position_contact_frames_in_world,
+            orientation_contact_frames_in_world=np.array(
+                [self._data.oMf[c.frame_id].rotation for c in self.robot.contacts]
+            ),
+        )
+
+    def observation(
+        self,
+        control_input: ControlInput,
+        *,
+        position_com_in_world: np.ndarray,
+        velocity_com_in_world: np.ndarray,
+        position_contact_frames_in_world: np.ndarray,
+        orientation_contact_frames_in_world: np.ndarray,
+    ) -> Observation:
+        """A behaviour's :class:`Observation` of the state and these quantities of it."""
+        return Observation(
+            time_s=control_input.time_s,
+            position_com_in_world=position_com_in_world,
+            velocity_com_in_world=velocity_com_in_world,
+            touching=control_input.contact_flags,
+            position_contact_frames_in_world=position_contact_frames_in_world,
+            joint_position=control_input.q[7:],
+            orientation_base_in_world_xyzw=control_input.q[3:7],
+            orientation_contact_frames_in_world=orientation_contact_frames_in_world,
+            ground_height=self._params["ground_height"],
+        )
 
     def _dynamics_terms(self, control_input: ControlInput) -> DynamicsTerms:
         """The state's dynamics terms by the ``kernel`` in force (Python by default, for now).

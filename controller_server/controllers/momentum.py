@@ -46,6 +46,7 @@ from controller_server.controllers.base import (
     check_finite_dynamics,
     normalized_configuration_part,
 )
+from controller_server.controllers.compiled_tick import CompiledWeightedTick
 from controller_server.controllers.diagnostics import core_diagnostics, with_extras
 from controller_server.controllers.point_targets import POINT_PREFIX, point_target
 from controller_server.dynamics import (
@@ -56,6 +57,7 @@ from controller_server.dynamics import (
 )
 from controller_server.errors import InvalidParams
 from controller_server.features import (
+    JointLimitSet,
     Objective,
     load_motion_clip,
 )
@@ -223,6 +225,7 @@ class MomentumController(Controller):
         self._last_flags: tuple[bool, ...] | None = None
         self._last_wrenches: np.ndarray | None = None
         self._last_optimizer: dict[str, Any] = {}
+        self._compiled_tick: CompiledWeightedTick | None = None  # at the first compiled tick
         super().__init__(robot, params)
 
     # Parameters -----------------------------------------------------------------
@@ -281,8 +284,20 @@ class MomentumController(Controller):
 
     # One tick -------------------------------------------------------------------
 
+    def clip_sample(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The motion clip's ``q_ref, v_ref, a_ref`` at ``time_s``, or ``None`` for the pose."""
+        return self._tracking.clip_sample(time_s, self.in_force())
+
+    def joint_limits(self) -> JointLimitSet:
+        """The soft joint limits of the tracking task (eq. 6.5–6.6)."""
+        return self._tracking.joint_limits
+
     def compute(self, control_input: ControlInput) -> ControlOutput:
         """Optimizer (every N-th tick or when supports change), then inverse dynamics.
+
+        With ``kernel = "compiled"`` the whole tick is the compiled core's
+        (:class:`~controller_server.controllers.compiled_tick.CompiledWeightedTick`); what
+        follows is the Python tick, its specification.
 
         Between optimizer runs the last ``q̈`` is realized by
         :func:`exact_inverse_dynamics` (two RNEA passes: the thesis' 1 kHz
@@ -295,6 +310,10 @@ class MomentumController(Controller):
                 (e.g. a mass matrix that is not positive definite).
         """
         try:
+            if self.in_force()["kernel"] == "compiled":
+                if self._compiled_tick is None:
+                    self._compiled_tick = CompiledWeightedTick(self)
+                return self._compiled_tick.compute(self, control_input)
             return self._compute(control_input)
         except np.linalg.LinAlgError as error:
             raise ControllerFailed(f"a linear solve failed at this state: {error}") from error
@@ -340,7 +359,7 @@ class MomentumController(Controller):
             points, origins = terms.position_points_in_world, terms.position_contact_frames_in_world
             if run_optimizer:
                 # A behaviour runs at the optimizer's rate: its targets steer the next solve.
-                self._host(control_input, terms)
+                self._host(control_input, lambda: self._observation(control_input, terms))
                 p = self.in_force()
                 polygon = _support_polygon(points, flags)
                 # β_ba's p and g (eq. 5.17) come from the body's measured ground wrench
@@ -424,41 +443,84 @@ class MomentumController(Controller):
     ) -> dict[str, Any]:
         solution = self._last_solution
         assert solution is not None
-        acceleration = dynamics.acceleration
-        objectives: list[Objective] = self._last_optimizer["objectives"]
         optimizer = self._last_optimizer
-        core = core_diagnostics(
-            position_com_in_world=motion.position_com_in_world,
-            linear_momentum=motion.linear_momentum,
-            angular_momentum=motion.angular_momentum,
-            total_mass=self.robot.total_mass,
-            momentum_rates_desired=(
-                optimizer["linear_momentum_rate_desired"],
-                optimizer["angular_momentum_rate_desired"],
-            ),
-            momentum_rates_achieved=(motion.linear_momentum_rate, motion.angular_momentum_rate),
-            position_contact_frames_in_world=position_contact_frames_in_world,
-            contact_wrench_in_world=dynamics.contact_wrench_in_world,
-            supports=flags,
-            ground_height=self.in_force()["ground_height"],
-            support_polygon_xy=polygon,
-            objective_residuals={o.name: o.residual(acceleration) for o in objectives},
-            constraint_residual=solution.constraint_residual,
-            root_wrench_residual=dynamics.root_wrench_residual,
-            saturated_joints=dynamics.saturated_joints,
-        )
-        return with_extras(
-            core,
-            "weighted",
+        objectives: list[Objective] = optimizer["objectives"]
+        return weighted_diagnostics(
+            self.robot.total_mass,
+            self.in_force()["ground_height"],
+            flags,
             {
-                "optimizer_ran": optimizer_ran,
+                "position_com_in_world": motion.position_com_in_world,
+                "linear_momentum": motion.linear_momentum,
+                "angular_momentum": motion.angular_momentum,
+                "linear_momentum_rate": motion.linear_momentum_rate,
+                "angular_momentum_rate": motion.angular_momentum_rate,
+                "linear_momentum_rate_desired": optimizer["linear_momentum_rate_desired"],
+                "angular_momentum_rate_desired": optimizer["angular_momentum_rate_desired"],
                 "angular_momentum_weight": optimizer["angular_momentum_weight"],
+                "position_contact_frames_in_world": position_contact_frames_in_world,
+                "contact_wrench_in_world": dynamics.contact_wrench_in_world,
+                "support_polygon_xy": polygon,
+                "objective_residuals": {
+                    o.name: o.residual(dynamics.acceleration) for o in objectives
+                },
+                "constraint_residual": solution.constraint_residual,
+                "root_wrench_residual": dynamics.root_wrench_residual,
+                "saturated_joints": dynamics.saturated_joints,
+                "optimizer_ran": optimizer_ran,
                 "objective_condition_number": solution.objective_condition_number,
                 "schur_condition_number": solution.schur_condition_number,
                 "objective_damping": solution.objective_damping,
                 "constraint_damping": solution.constraint_damping,
             },
         )
+
+
+def weighted_diagnostics(
+    total_mass: float, ground_height: float, flags: tuple[bool, ...], values: Mapping[str, Any]
+) -> dict[str, Any]:
+    """The weighted controllers' diagnostics from one tick's ``values`` (either kernel's).
+
+    ``values``: the CM, momenta and their achieved rates, the optimizer's desired rates and
+    β_ba, contact origins and commanded wrenches, the support polygon, the objectives'
+    residuals at the commanded ``q̈``, the KKT's and the inverse dynamics' numbers, by the
+    names :func:`core_diagnostics` and the ``weighted`` extras use.
+    """
+    core = core_diagnostics(
+        position_com_in_world=values["position_com_in_world"],
+        linear_momentum=values["linear_momentum"],
+        angular_momentum=values["angular_momentum"],
+        total_mass=total_mass,
+        momentum_rates_desired=(
+            values["linear_momentum_rate_desired"],
+            values["angular_momentum_rate_desired"],
+        ),
+        momentum_rates_achieved=(values["linear_momentum_rate"], values["angular_momentum_rate"]),
+        position_contact_frames_in_world=values["position_contact_frames_in_world"],
+        contact_wrench_in_world=values["contact_wrench_in_world"],
+        supports=flags,
+        ground_height=ground_height,
+        support_polygon_xy=values["support_polygon_xy"],
+        objective_residuals=values["objective_residuals"],
+        constraint_residual=values["constraint_residual"],
+        root_wrench_residual=values["root_wrench_residual"],
+        saturated_joints=values["saturated_joints"],
+    )
+    return with_extras(
+        core,
+        "weighted",
+        {
+            key: values[key]
+            for key in (
+                "optimizer_ran",
+                "angular_momentum_weight",
+                "objective_condition_number",
+                "schur_condition_number",
+                "objective_damping",
+                "constraint_damping",
+            )
+        },
+    )
 
 
 def _support_polygon(

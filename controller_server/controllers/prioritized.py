@@ -163,7 +163,7 @@ class PrioritizedController(Controller):
     def _compute(self, control_input: ControlInput) -> ControlOutput:
         terms = self._dynamics_terms(control_input)
         check_finite_dynamics(terms)
-        targets = self._host(control_input, terms)
+        targets = self._host(control_input, lambda: self._observation(control_input, terms))
         if targets is not None and targets.com_height_changes != self._height_changes_seen:
             self._height_changes_seen = targets.com_height_changes
             self._height.restart()

@@ -9,6 +9,7 @@
 #include <nanobind/stl/vector.h>
 
 #include "bind_parts.hpp"
+#include "joint_limits.hpp"
 #include "weighted_tick.hpp"
 
 namespace nb = nanobind;
@@ -59,6 +60,11 @@ void set_params(WeightedTick& tick, const nb::dict& values) {
   vector("friction_coefficients", p.friction_coefficients);
   number("objective_gain_bound", p.objective_gain_bound);
   number("constraint_gain_bound", p.constraint_gain_bound);
+  if (values.contains("ground_force_mode")) {
+    tick.measured_ground_forces = nb::cast<std::string>(values["ground_force_mode"]) == "measured";
+  }
+  number("force_regularization", tick.weights.force_regularization);
+  number("support_weight", tick.weights.support_weight);
   if (values.contains("optimizer_period_ticks")) {
     tick.optimizer_period_ticks = nb::cast<int>(values["optimizer_period_ticks"]);
   }
@@ -99,19 +105,96 @@ void set_points(WeightedTick& tick, const nb::list& targets) {
   }
 }
 
-// The optimizer alone at (q, v): the agreement tests' entry (q̈ of eq. 5.1).
-Eigen::VectorXd optimize(WeightedTick& tick, VectorRef q, VectorRef v,
-                         const std::vector<bool>& supports,
-                         std::optional<Eigen::Ref<const RowMatrix>> wrenches, VectorRef limit_errors,
-                         VectorRef q_ref, VectorRef v_ref, VectorRef a_ref) {
+// A new float64 array (copy) of an Eigen expression, as numpy wants it (C order).
+template <typename Derived>
+nb::object array(const Eigen::MatrixBase<Derived>& value) {
+  using Plain = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  return nb::cast(Plain(value));
+}
+nb::object vector(const Eigen::Ref<const Eigen::VectorXd>& value) {
+  return nb::cast(Eigen::VectorXd(value));
+}
+
+// One whole tick: a dict of fresh arrays (ControlOutput's fields), "failure" (str or None),
+// "optimizer_ran", and with want_diagnostics what MomentumController._diagnostics reads.
+nb::dict compute(WeightedTick& tick, VectorRef q, VectorRef v, const std::vector<bool>& supports,
+                 std::optional<Eigen::Ref<const RowMatrix>> measured_wrenches,
+                 std::optional<VectorRef> q_ref,
+                 std::optional<VectorRef> v_ref, std::optional<VectorRef> a_ref, bool prepared,
+                 bool want_diagnostics) {
+  const Model& model = tick.model();
+  if (q.size() != model.nq || v.size() != model.nv) {
+    throw std::invalid_argument("q or v has the wrong size");
+  }
+  if (supports.size() != tick.terms().contacts.size()) {
+    throw std::invalid_argument("one support flag per contact is needed");
+  }
   const RowMatrix none(0, 6);
+  const Eigen::VectorXd empty(0);
+  std::string failure;
   {
     nb::gil_scoped_release release;
-    tick.prepare(q, v);
-    tick.optimize(q, v, supports, wrenches ? *wrenches : Eigen::Ref<const RowMatrix>(none),
-                  limit_errors, q_ref, v_ref, a_ref);
+    failure = tick.compute(q, v, supports, measured_wrenches ? *measured_wrenches : Eigen::Ref<const RowMatrix>(none),
+                           q_ref ? *q_ref : VectorRef(empty),
+                           v_ref ? *v_ref : VectorRef(empty), a_ref ? *a_ref : VectorRef(empty),
+                           prepared, want_diagnostics);
   }
-  return tick.acceleration_desired();
+  nb::dict out;
+  out["failure"] = failure.empty() ? nb::none() : nb::cast(failure);
+  out["optimizer_ran"] = tick.optimizer_ran();
+  if (!failure.empty()) return out;
+  const InverseDynamicsResult& result = tick.result();
+  out["acceleration"] = vector(result.acceleration);
+  out["joint_torque"] = vector(result.joint_torque);
+  out["contact_force_in_world"] = array(result.contact_force_in_world);
+  out["contact_wrench_in_world"] = array(result.contact_wrench_in_world);
+  out["root_wrench_residual"] = result.root_wrench_residual;
+  out["saturated_joints"] = result.saturated_joints;
+  out["inverse_dynamics_path"] = path_name(result.path);
+  if (!want_diagnostics) return out;
+  const TickDiagnostics& d = tick.diagnostics();
+  const OptimizerReport& report = tick.optimizer().report();
+  out["position_com_in_world"] = vector(d.position_com_in_world);
+  out["linear_momentum"] = vector(d.linear_momentum);
+  out["angular_momentum"] = vector(d.angular_momentum);
+  out["linear_momentum_rate"] = vector(d.linear_momentum_rate);
+  out["angular_momentum_rate"] = vector(d.angular_momentum_rate);
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> polygon(
+      static_cast<Eigen::Index>(d.support_polygon.size()), 2);
+  for (std::size_t i = 0; i < d.support_polygon.size(); ++i) {
+    polygon.row(static_cast<Eigen::Index>(i)) = d.support_polygon[i].transpose();
+  }
+  out["support_polygon_xy"] = nb::cast(polygon);
+  out["position_contact_frames_in_world"] = array(tick.terms().position_contact_frames_in_world);
+  nb::dict residuals;
+  for (const auto& [name, value] : d.objective_residuals) residuals[name.c_str()] = value;
+  out["objective_residuals"] = residuals;
+  out["linear_momentum_rate_desired"] = vector(report.linear_momentum_rate_desired);
+  out["angular_momentum_rate_desired"] = vector(report.angular_momentum_rate_desired);
+  out["angular_momentum_weight"] = report.angular_momentum_weight;
+  out["constraint_residual"] = report.kkt.constraint_residual;
+  out["objective_condition_number"] = report.kkt.objective_condition_number;
+  out["schur_condition_number"] = report.kkt.schur_condition_number;
+  out["objective_damping"] = report.kkt.objective_damping;
+  out["constraint_damping"] = report.kkt.constraint_damping;
+  return out;
+}
+
+// What a behaviour observes of the prepared state (behaviors.Observation's fields).
+nb::dict observation(const WeightedTick& tick) {
+  const Terms& terms = tick.terms();
+  nb::dict out;
+  out["position_com_in_world"] = vector(terms.position_com_in_world);
+  out["velocity_com_in_world"] = vector(terms.linear_momentum / terms.total_mass);
+  out["position_contact_frames_in_world"] = array(terms.position_contact_frames_in_world);
+  const std::vector<ContactSpec>& contacts = tick.core().contacts();
+  RowMatrix rotations(static_cast<Eigen::Index>(3 * contacts.size()), 3);
+  for (std::size_t c = 0; c < contacts.size(); ++c) {
+    rotations.middleRows<3>(static_cast<Eigen::Index>(3 * c)) =
+        tick.data().oMf[contacts[c].frame_id].rotation();
+  }
+  out["orientation_contact_frames_in_world"] = nb::cast(rotations);  // (3 contacts, 3)
+  return out;
 }
 
 }  // namespace
@@ -121,8 +204,11 @@ void bind_weighted(nb::module_& m) {
                            "The weighted controllers' tick (Macchietto 2008, eq. 5.1 and 4.2).")
       .def(
           "__init__",
-          [](WeightedTick* self, const DynamicsCore& core) { new (self) WeightedTick(core); },
-          "core"_a, "A workspace on `core`'s model and contacts.")
+          [](WeightedTick* self, const DynamicsCore& core, const Eigen::VectorXd& torque_limit) {
+            new (self) WeightedTick(core, torque_limit);
+          },
+          "core"_a, "torque_limit"_a,
+          "A workspace on `core`'s model and contacts, with the joints' torque limits.")
       .def("set_params", &set_params, "values"_a,
            "Take the optimizer's parameters from a dict of parameter values (those present).")
       .def("set_points", &set_points, "targets"_a,
@@ -145,9 +231,18 @@ void bind_weighted(nb::module_& m) {
             return d;
           },
           "What the last optimizer run reports (desired momentum rates, β_ba, the KKT's).")
-      .def("optimize", &optimize, "q"_a, "v"_a, "supports"_a, "wrenches"_a.none(),
-           "limit_errors"_a, "q_ref"_a, "v_ref"_a, "a_ref"_a,
-           "The dynamics terms and the optimizer at (q, v): q̈ of eq. 5.1.");
+      .def("set_limits", &WeightedTick::set_limits, "limits"_a,
+           "The soft joint limits (a JointLimits) whose errors raise the tracking gains.")
+      .def("optimizer_due", &WeightedTick::optimizer_due, "supports"_a,
+           "Whether the next tick with these supports runs the optimizer.")
+      .def("prepare", &WeightedTick::prepare, "q"_a, "v"_a,
+           nb::call_guard<nb::gil_scoped_release>(),
+           "The dynamics terms at (q, v), for a behaviour to observe before compute(prepared=True).")
+      .def("observation", &observation, "What a behaviour reads of the prepared state.")
+      .def("compute", &compute, "q"_a, "v"_a, "supports"_a, "measured_wrenches"_a.none(),
+           "q_ref"_a.none(), "v_ref"_a.none(), "a_ref"_a.none(),
+           "prepared"_a = false, "want_diagnostics"_a = true,
+           "One whole tick (terms, optimizer when due, inverse dynamics): a dict.");
 }
 
 }  // namespace poise

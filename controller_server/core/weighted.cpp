@@ -25,8 +25,9 @@ WeightedOptimizer::WeightedOptimizer(const Model& model, std::size_t contact_cou
       hessian_(Eigen::MatrixXd::Zero(model.nv, model.nv)),
       gradient_(Eigen::VectorXd::Zero(model.nv)),
       frame_jacobian_(Data::Matrix6x::Zero(6, model.nv)) {
-  linear_ = {RowMatrix::Zero(2, model.nv), Eigen::VectorXd::Zero(2), 0.0, false};
-  angular_ = {RowMatrix::Zero(3, model.nv), Eigen::VectorXd::Zero(3), 0.0, false};
+  linear_ = {"linear_momentum", RowMatrix::Zero(2, model.nv), Eigen::VectorXd::Zero(2), 0.0, false};
+  angular_ = {"angular_momentum", RowMatrix::Zero(3, model.nv), Eigen::VectorXd::Zero(3), 0.0,
+              false};
   C_.resize(static_cast<Eigen::Index>(6 * contact_count), model.nv);
   d_.resize(static_cast<Eigen::Index>(6 * contact_count));
   for (Polygon* polygon : {&polygon_, &admissible_, &polygon_scratch_.sorted,
@@ -212,9 +213,11 @@ bool WeightedOptimizer::optimize(
   linear_momentum(terms, v, supports, params, gravity);
   angular_momentum(terms, supports, params, wrenches);
   if (points_.size() < points.size()) {
-    points_.resize(points.size(), Rows{RowMatrix::Zero(3, model_.nv), Eigen::VectorXd::Zero(3)});
+    points_.resize(points.size(), Rows{"", RowMatrix::Zero(3, model_.nv), Eigen::VectorXd::Zero(3)});
   }
+  point_count_ = points.size();
   for (std::size_t i = 0; i < points.size(); ++i) {
+    points_[i].name = "point:" + points[i].name;  // reuses its capacity: same names each tick
     point(model_, data, points[i], points_[i]);
     add_rows(points_[i]);
   }
@@ -232,7 +235,6 @@ bool WeightedOptimizer::optimize(
 }
 
 void WeightedOptimizer::residuals(const Eigen::Ref<const Eigen::VectorXd>& x,
-                                  const std::vector<PointTarget>& points,
                                   std::vector<std::pair<std::string, double>>& out) const {
   out.clear();
   // Objective.residual: ‖√w (A x − b)‖.
@@ -242,11 +244,9 @@ void WeightedOptimizer::residuals(const Eigen::Ref<const Eigen::VectorXd>& x,
   const auto weighted = [&x](const Rows& rows) {
     return std::sqrt(rows.weight) * (rows.A * x - rows.b).norm();
   };
-  if (linear_.present) out.emplace_back("linear_momentum", weighted(linear_));
-  if (angular_.present) out.emplace_back("angular_momentum", weighted(angular_));
-  for (std::size_t i = 0; i < points.size() && i < points_.size(); ++i) {
-    out.emplace_back("point:" + points[i].name, weighted(points_[i]));
-  }
+  if (linear_.present) out.emplace_back(linear_.name, weighted(linear_));
+  if (angular_.present) out.emplace_back(angular_.name, weighted(angular_));
+  for (std::size_t i = 0; i < point_count_; ++i) out.emplace_back(points_[i].name, weighted(points_[i]));
 }
 
 }  // namespace poise

@@ -59,6 +59,7 @@ struct PointTarget {
 
 // One objective's rows (A x − b) with one weight per row, kept for the residuals.
 struct Rows {
+  std::string name;     // the task's (diagnostics key)
   RowMatrix A;          // (m, nv)
   Eigen::VectorXd b;    // (m,)
   double weight = 0.0;  // every row's weight
@@ -100,7 +101,6 @@ class WeightedOptimizer {
   // ‖√w (A x − b)‖ of each task at the last optimizer run, in stack order (names: tracking,
   // linear_momentum, angular_momentum, point:<name>), for the tasks that had rows.
   void residuals(const Eigen::Ref<const Eigen::VectorXd>& x,
-                 const std::vector<PointTarget>& points,
                  std::vector<std::pair<std::string, double>>& out) const;
 
  private:
@@ -125,6 +125,7 @@ class WeightedOptimizer {
   Eigen::VectorXd difference_;        // q_ref ⊖ q
   Rows linear_, angular_;
   std::vector<Rows> points_;
+  std::size_t point_count_ = 0;  // point targets at the last run
   Eigen::MatrixXd hessian_;
   Eigen::VectorXd gradient_;
   Eigen::MatrixXd C_;

@@ -7,6 +7,9 @@ clip's ``q, q̇, q̈``, with each joint's gains raised as it passes a soft limit
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 import pinocchio as pin
 
@@ -49,17 +52,31 @@ class TrackingTask(Task):
         """Forget the rows' weights (the parameters changed)."""
         self._row_weights = None
 
+    def clip_sample(
+        self, time_s: float, params: Mapping[str, Any]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The clip's ``q, v, a`` at ``time_s`` (by ``clip_start_s``, ``_speed``, ``_loop``)."""
+        if self.clip is None:
+            return None
+        sample = self.clip.sample(
+            time_s,
+            start_s=params["clip_start_s"],
+            speed=params["clip_speed"],
+            loop=params["clip_loop"],
+        )
+        return sample.q, sample.v, sample.a
+
+    @property
+    def joint_limits(self) -> JointLimitSet:
+        """The soft joint limits whose violations ``e`` raise the gains (eq. 6.5–6.6)."""
+        return self._limits
+
     def reference(self, tick: Tick) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``q_ref, v_ref, a_ref``: the clip's sample at the tick's time, or the fixed pose."""
         p, model = tick.params, tick.robot.model
-        if self.clip is not None:
-            sample = self.clip.sample(
-                tick.time_s,
-                start_s=p["clip_start_s"],
-                speed=p["clip_speed"],
-                loop=p["clip_loop"],
-            )
-            q_ref, v_ref, a_ref = sample.q.copy(), sample.v, sample.a
+        sample = self.clip_sample(tick.time_s, p)
+        if sample is not None:
+            q_ref, v_ref, a_ref = sample[0].copy(), sample[1], sample[2]
         else:
             q_ref = pin.neutral(model)
             q_ref[3:7] = p["reference_base_orientation_xyzw"]

@@ -1,0 +1,158 @@
+"""The weighted controllers' compiled tick against the Python tick, its specification.
+
+Through a session table, as a worker serves them, two sessions per model and controller —
+``kernel = "compiled"`` (the core's ``WeightedTick``: terms, optimizer, inverse dynamics in
+one call) and ``kernel = "python"`` — take the same 1,000 states: random states near
+standing (random contact flags, measured wrenches on half of them), the states of a
+recorded push (the replay fixture), and IMU states (estimated base). Their commands agree to
+1e-8 relative to each field's scale, or to what the conditioning of the tick's KKT allows
+(``4 ε κ``, κ the condition number of the support constraints' Schur complement ``C M⁻¹
+Cᵀ``, which the damped root translation makes 1e8–1e9 in double support: two correct
+implementations of App. D round differently by about that much).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clients.replay import read_recorded
+from clients.sampling import random_state
+from clients.state import RobotState
+from controller_server.controllers import ControlInput, create_controller
+from controller_server.models import BUILTIN_MODELS, load_robot_model
+from controller_server.session_table import SessionTable
+from protocol import decode, encode
+from protocol.messages import Command, Error, Hello, ImuSample, SetParams, State, Welcome
+
+FIXTURES = Path(__file__).parent.parent / "fixtures"
+RANDOM_STATES = 700
+IMU_STATES = 300
+TOLERANCE = 1e-8
+EPSILON = float(np.finfo(float).eps)
+FIELDS = ("joint_acceleration", "joint_torque", "contact_force_in_world", "contact_wrench_in_world")
+
+
+class Pair:
+    """Two sessions of one client, one per kernel, fed the same requests."""
+
+    def __init__(self, hello: Hello):
+        self.tables = {kernel: SessionTable() for kernel in ("compiled", "python")}
+        params = {**hello.params}
+        self.welcome: Welcome | None = None
+        for kernel, table in self.tables.items():
+            reply = self._ask(
+                table, hello.model_copy(update={"params": params | {"kernel": kernel}})
+            )
+            assert isinstance(reply, Welcome), reply
+            self.welcome = reply
+        self.worst = 0.0
+        self.compared = 0
+
+    @staticmethod
+    def _ask(table: SessionTable, message):
+        return decode(encode(table.handle(b"client", encode(message))))
+
+    def send(self, message: State | SetParams) -> None:
+        replies = {kernel: self._ask(table, message) for kernel, table in self.tables.items()}
+        have, want = replies["compiled"], replies["python"]
+        if isinstance(want, Error) or isinstance(have, Error):
+            assert type(have) is type(want), (have, want)
+            assert have.code == want.code, (have, want)
+            return
+        if not isinstance(want, Command):
+            return
+        assert isinstance(have, Command)
+        condition = 1.0
+        if want.diagnostics is not None:
+            condition = float(want.diagnostics.weighted["schur_condition_number"])
+        bound = max(TOLERANCE, 4 * EPSILON * condition)
+        for field in FIELDS:
+            expected = np.asarray(getattr(want, field), dtype=float)
+            got = np.asarray(getattr(have, field), dtype=float)
+            scale = max(float(np.max(np.abs(expected), initial=0.0)), 1.0)
+            error = float(np.max(np.abs(got - expected), initial=0.0)) / scale
+            assert error <= bound, (field, error, bound, message.seq)
+            self.worst = max(self.worst, error)
+        self.compared += 1
+
+
+@pytest.mark.parametrize("model", tuple(BUILTIN_MODELS))
+@pytest.mark.parametrize("controller", ["momentum", "tracking"])
+def test_the_compiled_tick_agrees_with_the_python_tick(model, controller):
+    pair = Pair(Hello(seq=1, model=model, controller=controller, diagnostics_period_ticks=1))
+    welcome = pair.welcome
+    rng = np.random.default_rng(7)
+    for seq in range(2, 2 + RANDOM_STATES):
+        state = random_state(
+            welcome, rng, spread=float(rng.choice([0.03, 0.1, 0.3])), wrenches=bool(seq % 2)
+        )
+        pair.send(state.model_copy(update={"seq": seq}))
+    robot_state = RobotState.standing(welcome)
+    gravity_up = np.array([0.0, 0.0, 9.80665])
+    for step in range(IMU_STATES):
+        sample = ImuSample(
+            angular_velocity_imu_in_imu=rng.normal(0, 0.05, 3),
+            linear_acceleration_imu_in_imu=gravity_up + rng.normal(0, 0.2, 3),
+        )
+        flags = [True] * len(welcome.contacts)
+        message = robot_state.to_imu_message(1.0 + 0.001 * step, flags, sample)
+        pair.send(message.model_copy(update={"seq": 10_000 + step}))
+    print(
+        f"{model} {controller}: worst relative difference {pair.worst:.2e} "
+        f"over {pair.compared} commands"
+    )
+    assert pair.compared >= 0.9 * (RANDOM_STATES + IMU_STATES)
+
+
+def test_a_recorded_push_agrees():
+    """The momentum fixture's states (a 150 N chest push), both kernels, command by command."""
+    session = read_recorded(FIXTURES / "replay_momentum_push.mcap").session
+    pair = Pair(session.hello.model_copy(update={"diagnostics_period_ticks": 1}))
+    for _, request in session.requests:
+        pair.send(request)
+    print(f"push: worst relative difference {pair.worst:.2e} over {pair.compared} commands")
+    assert pair.compared >= 150
+
+
+def test_behaviours_clips_and_points_run_in_the_compiled_tick():
+    """A hosted behaviour, a motion clip and a point target: the same commands either way."""
+    robot = load_robot_model("thesis_humanoid")
+    point = {
+        "frame": robot.contacts[0].frame_name,
+        "target_position_in_world": [0.1, 0.1, 0.2],
+    }
+    for params in (
+        {"behavior": "sway"},
+        {"clip": "squat", "clip_loop": True},
+        {"point:hand": point},
+        {"optimizer_period_ticks": 5},
+        {"ground_force_mode": "measured"},
+    ):
+        controllers = {
+            kernel: create_controller("momentum", robot, {**params, "kernel": kernel})
+            for kernel in ("compiled", "python")
+        }
+        rng = np.random.default_rng(3)
+        q, v = robot.standing_configuration.copy(), np.zeros(robot.model.nv)
+        for step in range(60):
+            wrenches = np.tile([0, 0, robot.total_mass * 4.9, 0, 0, 0], (len(robot.contacts), 1))
+            control_input = ControlInput(
+                0.01 * step,
+                q,
+                v + rng.normal(0, 0.01, v.size),
+                tuple([True] * len(robot.contacts)),
+                wrenches,
+                True,
+            )
+            outputs = {k: c.compute(control_input) for k, c in controllers.items()}
+            for field in ("joint_torque", "contact_force_in_world", "acceleration"):
+                want = getattr(outputs["python"], field)
+                got = getattr(outputs["compiled"], field)
+                scale = max(float(np.max(np.abs(want))), 1.0)
+                condition = outputs["python"].diagnostics["weighted"]["schur_condition_number"]
+                bound = max(TOLERANCE, 4 * EPSILON * condition)
+                assert np.max(np.abs(got - want)) / scale <= bound, (params, step, field)
+            assert outputs["compiled"].diagnostics.keys() == outputs["python"].diagnostics.keys()
