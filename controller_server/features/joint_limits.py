@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from controller_server.compiled import load_core
 from controller_server.errors import ModelError
 from controller_server.features.swing_twist import (
     SwingCone,
@@ -290,6 +291,49 @@ class JointLimitSet:
         twist = np.where(twist <= -math.pi, twist + 2 * math.pi, twist)
         inside = cones_contain_units(self._normals, self._reflex, self._unlimited, bone)
         return inside & (self._twist_lower <= twist) & (twist <= self._twist_upper)
+
+    def compiled(self) -> Any:
+        """These limits in the compiled core, for the compiled tick: ``_core.JointLimits``.
+
+        Its ``errors(q)`` is :meth:`errors` in C++ (``controller_server/core/joint_limits.cpp``,
+        agreeing to rounding: ``tests/controller_server/test_compiled_joint_limits.py``). The
+        limits go over as they are here, so Python stays their source: each box's
+        ``lower``/``upper``; each ball's bone axis, its cone's face normals, edges and
+        ``reflex``, and its twist interval.
+
+        Returns:
+            A ``controller_server._core.JointLimits`` of ``nv`` DoFs.
+
+        Raises:
+            CompiledCoreUnavailable: The compiled core is not built (or stale).
+        """
+        core = load_core()
+        boxes = [
+            core.BoxLimit(
+                name=limit.name,
+                idx_q=limit.idx_q,
+                idx_v=limit.idx_v,
+                lower=limit.lower,
+                upper=limit.upper,
+            )
+            for limit in self.limits
+            if isinstance(limit, RevoluteJointLimit)
+        ]
+        balls = [
+            core.BallLimit(
+                name=ball.name,
+                idx_q=ball.idx_q,
+                idx_v=ball.idx_v,
+                bone_axis_in_parent=ball.bone_axis_in_parent,
+                face_normals_in_parent=ball.cone.face_normals_in_parent.reshape(-1, 3),
+                edges_in_parent=ball.cone.edges_in_parent.reshape(-1, 3),
+                reflex=ball.cone.reflex,
+                twist_lower_rad=ball.twist_lower_rad,
+                twist_upper_rad=ball.twist_upper_rad,
+            )
+            for ball in self._balls
+        ]
+        return core.JointLimits(self.nv, boxes, balls)
 
 
 def joint_limit_errors(limits: Iterable[JointLimit], q: np.ndarray, nv: int) -> np.ndarray:
