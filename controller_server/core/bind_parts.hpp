@@ -8,9 +8,10 @@
 namespace poise {
 
 // Each binds its step's functions and classes into `m` (controller_server._core).
+void bind_inverse_dynamics(nanobind::module_& m);  // bind_inverse_dynamics.cpp
 
 inline void bind_parts(nanobind::module_& m) {
-  (void)m;
+  bind_inverse_dynamics(m);
 }
 
 }  // namespace poise
