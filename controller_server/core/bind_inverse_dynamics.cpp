@@ -105,6 +105,8 @@ nb::dict solve(InverseDynamics& solver, nb::handle terms, nb::handle acceleratio
   out["root_wrench_residual"] = nb::float_(result->root_wrench_residual);
   out["saturated_joints"] = nb::int_(result->saturated_joints);
   out["path"] = nb::str(poise::path_name(result->path));
+  out["qp_iterations"] = nb::int_(result->qp_iterations);
+  out["qp_failures"] = nb::int_(result->qp_failures);
   return out;
 }
 
@@ -148,8 +150,9 @@ void bind_inverse_dynamics(nb::module_& m) {
            "friction_coefficients"_a, "measured_wrenches"_a = nb::none(),
            "force_regularization"_a = 1e-4, "support_weight"_a = 100.0,
            "solve_inverse_dynamics(terms, ...) with qp_solver='proxqp': a dict of new arrays "
-           "(InverseDynamicsResult's field names) and `path` (measured, exact, condensed_qp, "
-           "full_qp or least_squares). ValueError on non-finite inputs.")
+           "(InverseDynamicsResult's field names), `path` (measured, exact, condensed_qp, "
+           "full_qp or least_squares), `qp_iterations` (ProxQP's outer iterations, summed) and "
+           "`qp_failures` (its solves without an answer). ValueError on non-finite inputs.")
       .def("time_solve", &time_solve, "terms"_a, "acceleration"_a, "supports"_a,
            "friction_coefficients"_a, "measured_wrenches"_a = nb::none(),
            "force_regularization"_a = 1e-4, "support_weight"_a = 100.0, "repeats"_a = 1000,

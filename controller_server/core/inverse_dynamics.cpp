@@ -132,7 +132,8 @@ namespace {
 // (written to `x`), or false. Linear data larger than QP_DATA_SCALE are divided by k to that
 // size (in place: the callers rebuild them every solve) and x = k y is returned. Non-finite
 // data are not handed to the solver.
-bool solve_qp(std::unique_ptr<QP>& qp, std::size_t& allocations, const RowMatrix& P,
+bool solve_qp(std::unique_ptr<QP>& qp, std::size_t& allocations, InverseDynamicsResult& stats,
+              const RowMatrix& P,
               Eigen::VectorXd& q, const RowMatrix& C, Eigen::VectorXd& upper,
               const Eigen::VectorXd& lower, const RowMatrix* A, Eigen::VectorXd* b,
               Eigen::Ref<Eigen::VectorXd> x) {
@@ -171,7 +172,12 @@ bool solve_qp(std::unique_ptr<QP>& qp, std::size_t& allocations, const RowMatrix
     qp->init(P, q, *A, *b, C, lower, upper);
   }
   qp->solve();
-  if (qp->results.info.status != proxsuite::proxqp::QPSolverOutput::PROXQP_SOLVED) return false;
+  const proxsuite::proxqp::Info<double>& info = qp->results.info;
+  stats.qp_iterations += static_cast<int>(info.iter_ext);
+  if (info.status != proxsuite::proxqp::QPSolverOutput::PROXQP_SOLVED) {
+    ++stats.qp_failures;  // at max_iter, or (wrongly, on some feasible QPs) declared infeasible
+    return false;
+  }
   x = qp->results.x;
   if (k > 1.0) x *= k;
   return x.allFinite();
@@ -283,6 +289,8 @@ const InverseDynamicsResult& InverseDynamics::solve(
   }
   result_.status = InverseDynamicsStatus::ok;
   result_.detail = "";
+  result_.qp_iterations = 0;
+  result_.qp_failures = 0;
   if (!check_terms(terms, acceleration)) return result_;
   if (!std::isfinite(weights.force_regularization) || !std::isfinite(weights.support_weight)) {
     result_.status = InverseDynamicsStatus::non_finite_input;
@@ -378,6 +386,8 @@ const InverseDynamicsResult& InverseDynamics::solve_measured(
   }
   result_.status = InverseDynamicsStatus::ok;
   result_.detail = "";
+  result_.qp_iterations = 0;
+  result_.qp_failures = 0;
   if (!check_terms(terms, acceleration)) return result_;
   if (!measured_wrenches_in_world.allFinite()) {
     result_.status = InverseDynamicsStatus::non_finite_input;
@@ -468,7 +478,7 @@ bool InverseDynamics::condensed_motion(SupportSet& set, const Terms& terms,
   set.force_gradient.noalias() = -(set.k_inv_a.transpose() * c);
   for (Eigen::Index i = 0; i < set.points; ++i) write_pyramid(set.cones, i, set.mus[i]);
   set.cone_upper.setZero();
-  if (!solve_qp(set.force_qp, workspace_allocations_, set.force_hessian, set.force_gradient,
+  if (!solve_qp(set.force_qp, workspace_allocations_, result_, set.force_hessian, set.force_gradient,
                 set.cones, set.cone_upper, set.cone_lower, nullptr, nullptr, set.point_force)) {
     return false;
   }
@@ -519,7 +529,7 @@ bool InverseDynamics::full_motion(SupportSet& set, const Terms& terms,
   set.full_upper.head(upper_rows).setZero();
   set.full_upper.segment(upper_rows, joints) = torque_limit_ - h.tail(joints);
   set.full_upper.tail(joints) = torque_limit_ + h.tail(joints);
-  if (!solve_qp(set.full_qp, workspace_allocations_, set.full_hessian, set.full_gradient,
+  if (!solve_qp(set.full_qp, workspace_allocations_, result_, set.full_hessian, set.full_gradient,
                 set.full_inequality, set.full_upper, set.full_lower, &set.full_equality,
                 &set.full_equality_rhs, set.full_solution)) {
     return false;
@@ -539,7 +549,7 @@ void InverseDynamics::least_squares_balance(SupportSet& set, const Vector6& wren
   set.force_gradient.noalias() = -(root_columns * wrench);
   for (Eigen::Index i = 0; i < set.points; ++i) write_pyramid(set.cones, i, set.mus[i]);
   set.cone_upper.setZero();
-  if (!solve_qp(set.force_qp, workspace_allocations_, set.force_hessian, set.force_gradient,
+  if (!solve_qp(set.force_qp, workspace_allocations_, result_, set.force_hessian, set.force_gradient,
                 set.cones, set.cone_upper, set.cone_lower, nullptr, nullptr, set.point_force)) {
     set.point_force.setZero();
   }

@@ -57,6 +57,8 @@ struct InverseDynamicsResult {
   double root_wrench_residual = 0.0;    // ‖(M q̈ + h − J_cᵀ f)_root‖ before correction (N, N·m)
   int saturated_joints = 0;             // DoFs whose torque was clipped
   InverseDynamicsPath path = InverseDynamicsPath::exact;
+  int qp_iterations = 0;    // ProxQP's outer iterations over this solve's QPs
+  int qp_failures = 0;      // ProxQP solves of this call that gave no answer (not SOLVED)
   InverseDynamicsStatus status = InverseDynamicsStatus::ok;
   const char* detail = "";  // with a status other than ok: what was wrong (a static string)
 };
