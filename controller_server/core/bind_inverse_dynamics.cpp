@@ -5,8 +5,10 @@
 // names of InverseDynamicsResult (inverse_dynamics.py) and `path`. time_solve() repeats
 // the C++ solve alone and returns its durations, for bench/inverse_dynamics_core.py.
 #include <chrono>
+#include <mutex>
 #include <cstdint>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include <nanobind/eigen/dense.h>
@@ -90,23 +92,24 @@ nb::dict solve(InverseDynamics& solver, nb::handle terms, nb::handle acceleratio
                double support_weight) {
   const Request request = make_request(terms, acceleration, supports, friction_coefficients,
                                        measured_wrenches, force_regularization, support_weight);
-  const InverseDynamicsResult* result = nullptr;
+  InverseDynamicsResult result;  // a copy of the solver's, taken under its lock
   {
     nb::gil_scoped_release release;
-    result = &run(solver, request);
+    const std::lock_guard<std::mutex> lock(solver.mutex());
+    result = run(solver, request);
   }
-  raise_status(*result);
-  // Fresh arrays: nanobind's Eigen caster moves each copy into a new numpy array.
+  raise_status(result);
+  // Fresh arrays: nanobind's Eigen caster moves each (copied) matrix into a new numpy array.
   nb::dict out;
-  out["joint_torque"] = nb::cast(Eigen::VectorXd(result->joint_torque));
-  out["contact_force_in_world"] = nb::cast(poise::Points(result->contact_force_in_world));
-  out["contact_wrench_in_world"] = nb::cast(poise::RowMatrix(result->contact_wrench_in_world));
-  out["acceleration"] = nb::cast(Eigen::VectorXd(result->acceleration));
-  out["root_wrench_residual"] = nb::float_(result->root_wrench_residual);
-  out["saturated_joints"] = nb::int_(result->saturated_joints);
-  out["path"] = nb::str(poise::path_name(result->path));
-  out["qp_iterations"] = nb::int_(result->qp_iterations);
-  out["qp_failures"] = nb::int_(result->qp_failures);
+  out["joint_torque"] = nb::cast(std::move(result.joint_torque));
+  out["contact_force_in_world"] = nb::cast(std::move(result.contact_force_in_world));
+  out["contact_wrench_in_world"] = nb::cast(std::move(result.contact_wrench_in_world));
+  out["acceleration"] = nb::cast(std::move(result.acceleration));
+  out["root_wrench_residual"] = nb::float_(result.root_wrench_residual);
+  out["saturated_joints"] = nb::int_(result.saturated_joints);
+  out["path"] = nb::str(poise::path_name(result.path));
+  out["qp_iterations"] = nb::int_(result.qp_iterations);
+  out["qp_failures"] = nb::int_(result.qp_failures);
   return out;
 }
 
@@ -119,17 +122,24 @@ Eigen::VectorXd time_solve(InverseDynamics& solver, nb::handle terms, nb::handle
   const Request request = make_request(terms, acceleration, supports, friction_coefficients,
                                        measured_wrenches, force_regularization, support_weight);
   Eigen::VectorXd durations_s(repeats);
-  const InverseDynamicsResult* result = nullptr;
+  InverseDynamicsStatus status = InverseDynamicsStatus::ok;
+  const char* detail = "";
   {
     nb::gil_scoped_release release;
+    const std::lock_guard<std::mutex> lock(solver.mutex());
     using Clock = std::chrono::steady_clock;
     for (std::int64_t i = 0; i < repeats; ++i) {
       const Clock::time_point start = Clock::now();
-      result = &run(solver, request);
+      const InverseDynamicsResult& result = run(solver, request);
       durations_s[i] = std::chrono::duration<double>(Clock::now() - start).count();
+      status = result.status;
+      detail = result.detail;
     }
   }
-  raise_status(*result);
+  InverseDynamicsResult outcome;
+  outcome.status = status;
+  outcome.detail = detail;
+  raise_status(outcome);
   return durations_s;
 }
 

@@ -20,6 +20,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -72,8 +73,8 @@ struct InverseDynamicsWeights {
 struct SupportSet;  // one combination of support flags: its matrices and QPs (the .cpp)
 
 // One session's inverse dynamics: sizes and torque limits fixed at construction.
-// Not thread-safe: one object per session (solve() may run without the GIL, but never
-// twice at once on the same object).
+// One object per session: solve() may run without the GIL, but never twice at once on the
+// same object (callers that share one lock mutex(), as the Python binding does).
 class InverseDynamics {
  public:
   // nv DoFs (the first 6 the free-flyer root), contacts with point_counts[c] sole points
@@ -109,6 +110,7 @@ class InverseDynamics {
   std::size_t qp_cache_size() const;
   // Heap allocations made by this object after construction (support sets, QPs).
   std::size_t workspace_allocations() const { return workspace_allocations_; }
+  std::mutex& mutex() const { return *mutex_; }
 
  private:
   SupportSet& support_set(const std::vector<bool>& supports);
@@ -144,6 +146,7 @@ class InverseDynamics {
   Eigen::Matrix<double, Eigen::Dynamic, 7> condensed_rhs_;  // N⁻¹ [M_rootᵀ, −g]: [Y, Δ₀]
   Eigen::LLT<Eigen::Matrix<double, 6, 6>> root_llt_;        // G Gᵀ, then K
   InverseDynamicsResult result_;
+  std::unique_ptr<std::mutex> mutex_ = std::make_unique<std::mutex>();
 };
 
 }  // namespace poise
