@@ -32,6 +32,7 @@ from controller_server.models import BUILTIN_MODELS, RobotModel, load_robot_mode
 from controller_server.session import Session
 from controller_server.wire import control_input_from_state
 from protocol.messages import Hello
+from tests.controller_server.states import random_states
 from tests.helpers import random_state as random_wire_state
 
 MODEL_NAMES = tuple(BUILTIN_MODELS)
@@ -39,25 +40,11 @@ STATES = 1000
 TERMS_TOLERANCE = 1e-12
 TICK_STATES = 50
 TICK_TOLERANCE = 1e-8
-CONFIGURATION_SPREADS = (0.1, 0.5, 1.5)  # rad (and m) of the step from standing
-VELOCITY_SPREADS = (0.1, 1.0, 5.0)  # rad/s (and m/s)
 
 
 @pytest.fixture(scope="module", params=MODEL_NAMES)
 def robot(request) -> RobotModel:
     return load_robot_model(request.param)
-
-
-def random_states(robot: RobotModel, count: int, seed: int = 0):
-    """``(q, v)``: a step on the manifold from standing, and a velocity, of mixed spreads."""
-    model = robot.model
-    rng = np.random.default_rng(seed)
-    states = [(robot.standing_configuration.copy(), np.zeros(model.nv))]
-    while len(states) < count:
-        step = rng.normal(scale=rng.choice(CONFIGURATION_SPREADS), size=model.nv)
-        q = pin.integrate(model, robot.standing_configuration, step)
-        states.append((q, rng.normal(scale=rng.choice(VELOCITY_SPREADS), size=model.nv)))
-    return states
 
 
 def fields(terms: DynamicsTerms) -> dict[str, object]:
