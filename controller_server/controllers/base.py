@@ -254,11 +254,19 @@ class Controller(ABC):
             InvalidParams: Naming the first bad key and why.
         """
         validated = {key: self._validate(key, value) for key, value in params.items()}
+        self._check_together({**self._params, **validated})
         self._params.update(validated)
         self._in_force = None
         self.tasks.reset()
         if "behavior" in params:  # ends the behaviour under way: the next tick starts anew
             self._behavior, self._overrides, self._override_revision = None, {}, -1
+
+    def _check_together(self, params: Mapping[str, Any]) -> None:  # noqa: B027 (a hook)
+        """Refuse values that are valid one by one but not together (before any applies).
+
+        Raises:
+            InvalidParams: Naming the key to change and why.
+        """
 
     def _validate(self, key: str, value: Any) -> Any:
         spec = self.PARAMETERS.get(key)

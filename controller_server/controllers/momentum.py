@@ -206,10 +206,11 @@ class MomentumController(Controller):
             doc="w_s per kg on the supports' acceleration when q̈ cannot be realized (1)",
         ),
         "qp_solver": ParamSpec(
-            "daqp",
+            "proxqp",
             kind="choice",
-            choices=("daqp", "quadprog", "proxqp"),
-            doc="QP solver for contact forces (via qpsolvers)",
+            choices=("proxqp", "daqp", "quadprog"),
+            doc="QP solver for contact forces: the compiled kernel has ProxQP (its C++ API); "
+            "daqp and quadprog (via qpsolvers) need kernel 'python'",
         ),
     }
 
@@ -271,6 +272,15 @@ class MomentumController(Controller):
                 self.tasks.remove(POINT_PREFIX + name)
             else:
                 self.tasks.add(PointTask(name, target), target.weight)
+
+    def _check_together(self, params: Mapping[str, Any]) -> None:
+        """The compiled kernel solves its contact-force QPs with ProxQP only."""
+        if params["kernel"] == "compiled" and params["qp_solver"] != "proxqp":
+            raise InvalidParams(
+                "params.qp_solver",
+                f"{params['qp_solver']!r} needs kernel 'python'; the compiled kernel solves its "
+                "QPs with 'proxqp'",
+            )
 
     def _validate(self, key: str, value: Any) -> Any:
         array = super()._validate(key, value)

@@ -233,6 +233,14 @@ void bind_weighted(nb::module_& m) {
           "What the last optimizer run reports (desired momentum rates, β_ba, the KKT's).")
       .def("set_limits", &WeightedTick::set_limits, "limits"_a,
            "The soft joint limits (a JointLimits) whose errors raise the tracking gains.")
+      .def_prop_ro(
+          "acceleration_desired",
+          [](const WeightedTick& tick) { return Eigen::VectorXd(tick.acceleration_desired()); },
+          "The last optimizer run's q̈ (before the inverse dynamics makes it feasible).")
+      .def_prop_ro(
+          "inverse_dynamics_path",
+          [](const WeightedTick& tick) { return std::string(path_name(tick.result().path)); },
+          "Which branch of the inverse dynamics answered the last tick.")
       .def("optimizer_due", &WeightedTick::optimizer_due, "supports"_a,
            "Whether the next tick with these supports runs the optimizer.")
       .def("prepare", &WeightedTick::prepare, "q"_a, "v"_a,

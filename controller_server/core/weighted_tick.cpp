@@ -125,7 +125,9 @@ std::string WeightedTick::compute(const Eigen::Ref<const Eigen::VectorXd>& q,
     }
     const bool fixed_pose = q_ref.size() == 0;
     if (fixed_pose) q_ref_ = params.reference_configuration;
-    optimize(q, v, supports, have_measured ? measured_wrenches : last_wrenches_, limit_errors_,
+    optimize(q, v, supports,
+             have_measured ? measured_wrenches : Eigen::Ref<const RowMatrix>(last_wrenches_),
+             limit_errors_,
              fixed_pose ? Eigen::Ref<const Eigen::VectorXd>(q_ref_) : q_ref,
              fixed_pose ? Eigen::Ref<const Eigen::VectorXd>(zero_) : v_ref,
              fixed_pose ? Eigen::Ref<const Eigen::VectorXd>(zero_) : a_ref);
