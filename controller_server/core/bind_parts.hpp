@@ -8,9 +8,10 @@
 namespace poise {
 
 // Each binds its step's functions and classes into `m` (controller_server._core).
+void bind_estimator(nanobind::module_& m);  // bind_estimator.cpp: the IMU path's filter
 
 inline void bind_parts(nanobind::module_& m) {
-  (void)m;
+  bind_estimator(m);
 }
 
 }  // namespace poise
