@@ -313,7 +313,7 @@ void BaseEstimator::propagate(const Eigen::Ref<const Eigen::VectorXd>& angular_v
   // A_i3 = −(Ad_X̂)_i0 (−R, −[v]× R, −[p]× R, −[d_k]× R) and A₁₄ = −R; G = blkdiag(Ad_X̂, I₆)
   // in the state order. inekf.error_transition_matrix: A is nilpotent (A⁴ = 0; the chain
   // ζ → ξ_R → ξ_v → ξ_p has three links), so Φ = exp(A dt) = I + A dt + (A dt)²/2 + (A dt)³/6
-  // exactly; its only blocks besides I (with Aᵢⱼ scaled by dt) are those written below.
+  // exactly; `offset_` holds N = Φ − I, whose only blocks (Aᵢⱼ scaled by dt) are these.
   const int n = dim();
   const int contacts = static_cast<int>(stance_.size());
   const Eigen::Matrix3d gravity_x = lie::skew(gravity_) * dt;  // (A dt)₁₀
@@ -321,39 +321,68 @@ void BaseEstimator::propagate(const Eigen::Ref<const Eigen::VectorXd>& angular_v
   const Eigen::Matrix3d a13 = -(lie::skew(middle.col(0)) * rotation) * dt;
   const Eigen::Matrix3d a23 = -(lie::skew(middle.col(1)) * rotation) * dt;
   const Eigen::Matrix3d a21_a10 = gravity_x * dt;  // (A dt)₂₁ (A dt)₁₀ = dt [g]× dt
-  phi_.setIdentity(n, n);
-  phi_.block<3, 3>(0, 9) = a03;
-  phi_.block<3, 3>(3, 0) = gravity_x;
-  phi_.block<3, 3>(3, 9) = a13 + (gravity_x * a03) / 2.0;
-  phi_.block<3, 3>(3, 12) = a03;                        // (A dt)₁₄ = −R dt
-  phi_.block<3, 3>(6, 0) = a21_a10 / 2.0;
-  phi_.block<3, 3>(6, 3) = Eigen::Matrix3d::Identity() * dt;
-  phi_.block<3, 3>(6, 9) = a23 + (a13 * dt) / 2.0 + (a21_a10 * a03) / 6.0;
-  phi_.block<3, 3>(6, 12) = (a03 * dt) / 2.0;
+  offset_.setZero(n, n);
+  offset_.block<3, 3>(0, 9) = a03;
+  offset_.block<3, 3>(3, 0) = gravity_x;
+  offset_.block<3, 3>(3, 9) = a13 + (gravity_x * a03) / 2.0;
+  offset_.block<3, 3>(3, 12) = a03;                        // (A dt)₁₄ = −R dt
+  offset_.block<3, 3>(6, 0) = a21_a10 / 2.0;
+  offset_.block<3, 3>(6, 3) = Eigen::Matrix3d::Identity() * dt;
+  offset_.block<3, 3>(6, 9) = a23 + (a13 * dt) / 2.0 + (a21_a10 * a03) / 6.0;
+  offset_.block<3, 3>(6, 12) = (a03 * dt) / 2.0;
   for (int i = 0; i < contacts; ++i) {
-    phi_.block<3, 3>(15 + 3 * i, 9) = -(lie::skew(middle.col(2 + i)) * rotation) * dt;
+    offset_.block<3, 3>(15 + 3 * i, 9) = -(lie::skew(middle.col(2 + i)) * rotation) * dt;
   }
-  // Φ G: G's group blocks are Ad_X̂'s at the mid-step state, its bias block I₆.
-  scratch_.setZero(n, n);
-  scratch_.block<3, 3>(0, 0) = rotation;
+  // Φ = I + N with N zero outside the columns of ξ_R, ξ_v, ζ_g, ζ_a: Φ P Φᵀ = P' + P'[:, C] N[:, C]ᵀ
+  // with P' = P + N[:, C] P[C, :] (C those 12 columns), the products of (I + N) P (I + N)ᵀ
+  // without the identity's.
+  const auto couple = [&](StateMatrix& out, const StateMatrix& left, const StateMatrix& right,
+                          bool transpose_right) {
+    // out += left[:, C] right[C, :] (or right[:, C]ᵀ), C = {0 … 5, 9 … 14}.
+    if (transpose_right) {
+      out.noalias() += left.leftCols<6>() * right.leftCols<6>().transpose();
+      out.noalias() += left.middleCols<6>(9) * right.middleCols<6>(9).transpose();
+    } else {
+      out.noalias() += left.leftCols<6>() * right.topRows<6>();
+      out.noalias() += left.middleCols<6>(9) * right.middleRows<6>(9);
+    }
+  };
+  scratch_ = covariance_;
+  couple(scratch_, offset_, covariance_, false);  // Φ P
+  covariance_ = scratch_;
+  couple(covariance_, scratch_, offset_, true);   // Φ P Φᵀ
+  // Φ G = G + N G: G's group blocks are Ad_X̂'s at the mid-step state (rows ξ_R: R; ξ_v: [v]× R,
+  // R; ξ_p: [p]× R, R; ξ_dk: [d_k]× R, R), its bias block I₆; N G reads G's rows in C only.
+  phi_g_.setZero(n, n);
+  phi_g_.block<3, 3>(0, 0) = rotation;
   for (int i = 0; i < 2 + contacts; ++i) {
     const int row = i < 2 ? 3 + 3 * i : 15 + 3 * (i - 2);
-    scratch_.block<3, 3>(row, 0) = lie::skew(middle.col(i)) * rotation;
-    scratch_.block<3, 3>(row, row) = rotation;
+    phi_g_.block<3, 3>(row, 0) = lie::skew(middle.col(i)) * rotation;
+    phi_g_.block<3, 3>(row, row) = rotation;
   }
-  scratch_.block<6, 6>(9, 9).setIdentity();
-  phi_g_.noalias() = phi_ * scratch_;
-  // Q = diag(σ_g², σ_a², 0 (ξ_p), σ_bg², σ_ba², σ_slip² …), Q_d = Φ G Q Gᵀ Φᵀ dt.
-  StateVector q_diag = StateVector::Zero(n);
-  q_diag.segment<3>(0).setConstant(noise_.gyro_noise_density * noise_.gyro_noise_density);
-  q_diag.segment<3>(3).setConstant(noise_.accel_noise_density * noise_.accel_noise_density);
-  q_diag.segment<3>(9).setConstant(noise_.gyro_bias_random_walk * noise_.gyro_bias_random_walk);
-  q_diag.segment<3>(12).setConstant(noise_.accel_bias_random_walk * noise_.accel_bias_random_walk);
-  q_diag.tail(n - 15).setConstant(noise_.contact_slip_random_walk * noise_.contact_slip_random_walk);
-  scratch_.noalias() = phi_ * covariance_;
-  covariance_.noalias() = scratch_ * phi_.transpose();
-  scratch_.noalias() = (phi_g_ * q_diag.asDiagonal()) * phi_g_.transpose();
-  covariance_ += scratch_ * dt;
+  phi_g_.block<6, 6>(9, 9).setIdentity();
+  const Eigen::Matrix3d velocity_x_rotation = phi_g_.block<3, 3>(3, 0);
+  phi_g_.leftCols<3>().noalias() += offset_.middleCols<3>(0) * rotation;
+  phi_g_.leftCols<3>().noalias() += offset_.middleCols<3>(3) * velocity_x_rotation;
+  phi_g_.middleCols<3>(3).noalias() += offset_.middleCols<3>(3) * rotation;
+  phi_g_.middleCols<6>(9) += offset_.middleCols<6>(9);
+  // Q = diag(σ_g², σ_a², 0 (ξ_p), σ_bg², σ_ba², σ_slip² …), Q_d = Φ G Q Gᵀ Φᵀ dt: the columns
+  // of Φ G but ξ_p's, each weighted by its variance.
+  const double gyro_variance = noise_.gyro_noise_density * noise_.gyro_noise_density;
+  const double accel_variance = noise_.accel_noise_density * noise_.accel_noise_density;
+  const double gyro_walk = noise_.gyro_bias_random_walk * noise_.gyro_bias_random_walk;
+  const double accel_walk = noise_.accel_bias_random_walk * noise_.accel_bias_random_walk;
+  const double slip = noise_.contact_slip_random_walk * noise_.contact_slip_random_walk;
+  scratch_.resize(n, n);
+  scratch_.leftCols<3>() = phi_g_.leftCols<3>() * gyro_variance;
+  scratch_.middleCols<3>(3) = phi_g_.middleCols<3>(3) * accel_variance;
+  scratch_.middleCols<3>(6).setZero();
+  scratch_.middleCols<3>(9) = phi_g_.middleCols<3>(9) * gyro_walk;
+  scratch_.middleCols<3>(12) = phi_g_.middleCols<3>(12) * accel_walk;
+  scratch_.rightCols(n - 15) = phi_g_.rightCols(n - 15) * slip;
+  noise_term_.noalias() = scratch_.leftCols<6>() * phi_g_.leftCols<6>().transpose();
+  noise_term_.noalias() += scratch_.rightCols(n - 9) * phi_g_.rightCols(n - 9).transpose();
+  covariance_ += noise_term_ * dt;
 
   propagate_mean(rotation_, columns_, omega, accel, gravity_, dt);
 }
@@ -510,7 +539,8 @@ void BaseEstimator::estimate(BaseEstimateOut& out) const {
   to_base.block<3, 3>(3, 9) = -(rotation_base * lie::skew(offset)) * mount_rotation;
   to_base.block<3, 3>(6, 0) = -lie::skew(position);
   const Eigen::Matrix<double, 15, 15> top = covariance_.topLeftCorner<15, 15>();
-  out.covariance.noalias() = (to_base * top) * to_base.transpose();
+  const Eigen::Matrix<double, 15, 15> to_base_top = to_base.lazyProduct(top);
+  out.covariance.noalias() = to_base_top.lazyProduct(to_base.transpose());
   Eigen::Quaterniond quaternion(rotation_base);
   quaternion.normalize();
   out.position_base_in_world = position;

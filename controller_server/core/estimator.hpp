@@ -188,7 +188,7 @@ class BaseEstimator {
   // Workspaces (sizes within their maxima: no allocation).
   std::vector<Eigen::Vector3d> measured_y_;           // y_k per contact, in I
   std::vector<Eigen::Matrix3d> measured_covariance_;  // its covariance, in I
-  StateMatrix phi_, phi_g_, scratch_;
+  StateMatrix offset_, phi_g_, noise_term_, scratch_;  // Φ − I, Φ G, Q_d / dt, scratch
   GainMatrix p_ht_, gain_;
   GainTransposeMatrix gain_transpose_;  // S⁻¹ H P
   InnovationMatrix innovation_covariance_;

@@ -55,13 +55,13 @@ void GroundedLegKinematics::compute(const Eigen::Ref<const Eigen::VectorXd>& q,
                                     std::vector<CornerSet>& used) {
   const Model& model = *model_;
   const Eigen::Index joints = model.nv - 6;
-  // Forward kinematics and the joint Jacobians data.J, then the frame placements data.oMf.
+  // Forward kinematics and the joint Jacobians data.J; below, the contact frames' placements
+  // (the same products as updateFramePlacements, for those frames only).
   pinocchio::computeJointJacobians(model, data_, q);
-  pinocchio::updateFramePlacements(model, data_);
   const Eigen::RowVector3d up = rotation_base_in_world.row(2);  // world z of base vectors
 
   for (std::size_t c = 0; c < frame_ids_.size(); ++c) {
-    const pinocchio::SE3& placement = data_.oMf[frame_ids_[c]];
+    const pinocchio::SE3& placement = pinocchio::updateFramePlacement(model, data_, frame_ids_[c]);
     frame_jacobian_.setZero();
     pinocchio::getFrameJacobian(model, data_, frame_ids_[c], pinocchio::LOCAL_WORLD_ALIGNED,
                                 frame_jacobian_);
