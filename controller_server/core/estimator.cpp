@@ -532,15 +532,19 @@ void BaseEstimator::estimate(BaseEstimateOut& out) const {
   const Eigen::Vector3d angular_velocity = mount_rotation * (gyro_reading_ - bias_.head<3>());
   const Eigen::Vector3d velocity = columns_.col(0) - rotation_base * angular_velocity.cross(offset);
   const Eigen::Vector3d position = columns_.col(1) - rotation_base * offset;
-  // Invariant errors to conventional base errors (BaseEstimate.covariance); T is zero on the
-  // contact columns, so T P Tᵀ reads P's first 15 rows and columns.
-  Eigen::Matrix<double, 15, 15> to_base = Eigen::Matrix<double, 15, 15>::Identity();
-  to_base.block<3, 3>(3, 0) = -lie::skew(velocity);
-  to_base.block<3, 3>(3, 9) = -(rotation_base * lie::skew(offset)) * mount_rotation;
-  to_base.block<3, 3>(6, 0) = -lie::skew(position);
-  const Eigen::Matrix<double, 15, 15> top = covariance_.topLeftCorner<15, 15>();
-  const Eigen::Matrix<double, 15, 15> to_base_top = to_base.lazyProduct(top);
-  out.covariance.noalias() = to_base_top.lazyProduct(to_base.transpose());
+  // Invariant errors to conventional base errors (BaseEstimate.covariance): T P Tᵀ with
+  // T = I + E, E's blocks E₁₀ = −[v_B]×, E₁₃ = −R_WB [r_BI]× R_BI, E₂₀ = −[p_B]× (T is zero
+  // on the contact columns: P's first 15 rows and columns), as (T P) Tᵀ by E's blocks.
+  const Eigen::Matrix3d e10 = -lie::skew(velocity);
+  const Eigen::Matrix3d e13 = -(rotation_base * lie::skew(offset)) * mount_rotation;
+  const Eigen::Matrix3d e20 = -lie::skew(position);
+  Eigen::Matrix<double, 15, 15> t_p = covariance_.topLeftCorner<15, 15>();
+  t_p.middleRows<3>(3).noalias() += e10 * t_p.topRows<3>() + e13 * t_p.middleRows<3>(9);
+  t_p.middleRows<3>(6).noalias() += e20 * t_p.topRows<3>();
+  out.covariance = t_p;
+  out.covariance.middleCols<3>(3).noalias() +=
+      t_p.leftCols<3>() * e10.transpose() + t_p.middleCols<3>(9) * e13.transpose();
+  out.covariance.middleCols<3>(6).noalias() += t_p.leftCols<3>() * e20.transpose();
   Eigen::Quaterniond quaternion(rotation_base);
   quaternion.normalize();
   out.position_base_in_world = position;

@@ -41,8 +41,7 @@ GroundedLegKinematics::GroundedLegKinematics(std::shared_ptr<const Model> model,
     most = std::max(most, count);
   }
   corner_positions_ = Points::Zero(most, 3);
-  corner_jacobians_.assign(static_cast<std::size_t>(most),
-                           Eigen::Matrix<double, 3, Eigen::Dynamic>::Zero(3, model_->nv - 6));
+  corner_offsets_ = Points::Zero(most, 3);
 }
 
 void GroundedLegKinematics::normalize(Eigen::Ref<Eigen::VectorXd> q) const {
@@ -67,19 +66,20 @@ void GroundedLegKinematics::compute(const Eigen::Ref<const Eigen::VectorXd>& q,
                                 frame_jacobian_);
     const Points& corners = corners_in_frame_[c];
     const Eigen::Index count = corners.rows();
-    // Each corner p_f + R_f r and its Jacobian J_lin − [R_f r]× J_ang (joint columns only).
+    // Each corner p_f + R_f r (its Jacobian, J_lin − [R_f r]× J_ang, is linear in R_f r: the
+    // centroid's below is that of the corners' mean offset).
     double lowest = 0.0;
     double heights[32];
     for (Eigen::Index i = 0; i < count; ++i) {
-      const Eigen::Vector3d offset = placement.rotation() * corners.row(i).transpose();
-      corner_positions_.row(i) = (placement.translation() + offset).transpose();
-      corner_jacobians_[i] = frame_jacobian_.topRightCorner(3, joints) -
-                             lie::skew(offset) * frame_jacobian_.bottomRightCorner(3, joints);
+      corner_offsets_.row(i) = (placement.rotation() * corners.row(i).transpose()).transpose();
+      corner_positions_.row(i) = placement.translation().transpose() + corner_offsets_.row(i);
       heights[i] = up.dot(corner_positions_.row(i));
       // np.min: a NaN anywhere is the minimum.
-      lowest = i == 0 || std::isnan(heights[i]) || std::isnan(lowest)
-                   ? (std::isnan(lowest) && i > 0 ? lowest : heights[i])
-                   : std::min(lowest, heights[i]);
+      if (i == 0 || std::isnan(heights[i])) {
+        lowest = heights[i];
+      } else if (!std::isnan(lowest)) {
+        lowest = std::min(lowest, heights[i]);
+      }
     }
     // A foot keeps its previous corners while they all stay within twice the tolerance
     // (a change costs the filter that foot's history); else those within the tolerance.
@@ -97,15 +97,16 @@ void GroundedLegKinematics::compute(const Eigen::Ref<const Eigen::VectorXd>& q,
         if (heights[i] - lowest <= tolerance_m_) chosen |= CornerSet{1} << i;
       }
     }
-    // Their centroid and its Jacobian, the mean of the corners' (np.mean: sum, then divide).
+    // Their centroid and its Jacobian J_lin − [r̄]× J_ang, r̄ their mean offset from the frame
+    // (np.mean: sum, then divide; the mean of the corners' Jacobians up to rounding).
     ContactPoint& point = points[c];
+    Eigen::Vector3d offset = Eigen::Vector3d::Zero();
     point.position_in_base.setZero();
-    point.jacobian.setZero();
     int n = 0;
     for (Eigen::Index i = 0; i < count; ++i) {
       if (!(chosen >> i & 1U)) continue;
       point.position_in_base += corner_positions_.row(i).transpose();
-      point.jacobian += corner_jacobians_[i];
+      offset += corner_offsets_.row(i).transpose();
       ++n;
     }
     if (n == 0) {
@@ -113,7 +114,10 @@ void GroundedLegKinematics::compute(const Eigen::Ref<const Eigen::VectorXd>& q,
       point.jacobian.setConstant(std::numeric_limits<double>::quiet_NaN());
     } else {
       point.position_in_base /= n;
-      point.jacobian /= n;
+      offset /= n;
+      // (noalias: a product in an expression would be a heap temporary of nv − 6 columns)
+      point.jacobian = frame_jacobian_.topRightCorner(3, joints);
+      point.jacobian.noalias() -= lie::skew(offset) * frame_jacobian_.bottomRightCorner(3, joints);
     }
     used[c] = chosen;
   }

@@ -61,7 +61,7 @@ class GroundedLegKinematics {
   Data data_;
   Data::Matrix6x frame_jacobian_;   // (6, nv) scratch
   Points corner_positions_;         // (k, 3) of one contact, scratch
-  std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> corner_jacobians_;  // per corner
+  Points corner_offsets_;           // (k, 3): R_f r, scratch
 };
 
 }  // namespace poise
