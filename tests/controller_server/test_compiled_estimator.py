@@ -1,15 +1,16 @@
-"""The compiled estimator against its specification, `ImuBaseEstimator` with `kernel="python"`.
+"""The compiled estimator against its specification, the Python ``ImuBaseEstimator``.
 
 Per built-in model, 1,200 seeded IMU ticks in sequence (the filter state evolves): the
 synthetic base motion and BMI088-class IMU of ``test_base_estimator`` (its helpers) on an
 upside-down, offset IMU mount, the joints swaying about standing so that the feet's corners
 on the ground change, feet lifted and set down, a gap that restarts the filter, and bad
-inputs (NaN and infinite readings and joints, time not advancing, a wrong flag count)
-between good ones. Both kernels must raise the same error (type, field, words; the numbers in
-it within the tolerance) on the same ticks, and otherwise agree, estimate and filter state
-(pose, velocity, biases, covariance, stance points, time, corners in use), within 1e-8 of
-each field's scale. Then the hand-over between kernels in one estimator, and the session
-following its controller's ``kernel``.
+inputs between good ones, at the start too (NaN, infinite and misshapen readings and
+joints, time not advancing, a wrong flag count, no foot on the ground). Both kernels must
+raise the same error (type, field, words; the numbers in it within the tolerance) on the
+same ticks, and otherwise agree, estimate and filter state (pose, velocity, biases,
+covariance, stance points, time, corners in use), within 1e-8 of each field's scale. Then
+the hand-over between kernels in one estimator, and the session following its
+controller's ``kernel``.
 """
 
 from __future__ import annotations
@@ -44,7 +45,10 @@ BAD_INPUTS = {
     450: ("time", None, None),  # the previous tick's time again
     650: ("joint", None, np.nan),  # a leg joint: that foot's point is NaN
     760: ("flags", None, None),  # one flag too few
+    801: ("imu", "angular_velocity_imu_in_imu", np.array([0.0, np.nan, 0.0])),  # at the start
+    802: ("no stance", None, None),  # the start needs a foot on the ground
     905: ("joint", None, np.inf),
+    1000: ("imu", "angular_velocity_imu_in_imu", np.zeros(2)),  # misshapen
 }
 """Tick → what is wrong with it (each tick after it is good again)."""
 GAP_TICK = 800
@@ -112,6 +116,8 @@ def broken(robot, state: State, previous: State, kind: str, field, value) -> Sta
         return state.model_copy(update={"time_s": previous.time_s})
     if kind == "flags":
         return state.model_copy(update={"contact_flags": state.contact_flags[:-1]})
+    if kind == "no stance":
+        return state.model_copy(update={"contact_flags": [False] * len(state.contact_flags)})
     joint_position = state.joint_position.copy()
     # The first joint in the left foot's chain (below the free flyer).
     model = robot.model
@@ -245,11 +251,11 @@ def test_1200_imu_ticks_agree_with_the_python_filter(robot, ahrs):
     # Every bad input and the gap were refused, by both, naming the state's fields.
     assert [tick for tick, _ in errors] == sorted([*BAD_INPUTS, GAP_TICK])
     fields = dict(errors)
-    assert fields[150] == "imu.angular_velocity_imu_in_imu"
+    assert fields[150] == fields[801] == fields[1000] == "imu.angular_velocity_imu_in_imu"
     assert fields[350] == "imu.linear_acceleration_imu_in_imu"
     assert fields[450] == fields[GAP_TICK] == "time_s"
     assert fields[650] == fields[905] == "joint_position"
-    assert fields[760] == "contact_flags"
+    assert fields[760] == fields[802] == "contact_flags"
     assert stance_counts == {0, 1, 2}  # contact switches: both feet, one, none
 
 
