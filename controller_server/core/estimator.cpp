@@ -152,7 +152,10 @@ BaseEstimator::BaseEstimator(std::size_t contact_count, const ImuMount& mount,
        1e-6 + 1e-5 * Eigen::Matrix3d::Identity().array().abs())
           .all();
   if (!rotation.allFinite() || !orthonormal || !(rotation.determinant() > 0)) {
-    throw EstimatorInputError("imu_mount.rotation_imu_to_base", "not a rotation matrix");
+    throw EstimatorInputError("imu_mount.rotation_imu_to_base",
+                              "not a rotation matrix: [" + python_list(rotation.row(0)) + ", " +
+                                  python_list(rotation.row(1)) + ", " +
+                                  python_list(rotation.row(2)) + "]");
   }
   if (!(max_time_step_s > 0)) {
     throw EstimatorInputError("max_time_step_s",
@@ -388,7 +391,6 @@ void BaseEstimator::propagate(const Eigen::Ref<const Eigen::VectorXd>& angular_v
 }
 
 void BaseEstimator::keep_contacts(const int* kept, int count) {
-  const int old_dim = dim();
   int index[kMaxStateDim];
   for (int i = 0; i < 15; ++i) index[i] = i;
   for (int c = 0; c < count; ++c) {
@@ -399,7 +401,6 @@ void BaseEstimator::keep_contacts(const int* kept, int count) {
   for (int j = 0; j < new_dim; ++j) {
     for (int i = 0; i < new_dim; ++i) scratch_(i, j) = covariance_(index[i], index[j]);
   }
-  (void)old_dim;
   covariance_ = scratch_;
   for (int c = 0; c < count; ++c) {
     columns_.col(2 + c) = columns_.col(2 + kept[c]);  // kept is increasing: c ≤ kept[c]

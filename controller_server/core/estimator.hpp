@@ -146,7 +146,7 @@ class BaseEstimator {
   void correct(const std::vector<ContactPoint>& kinematics, const ContactFlags& flags);
   // Marginalise the contacts whose bit is set, if in stance.
   void forget_contacts(std::uint32_t contacts);
-  // Propagate and correct; initialise (levelled on the accelerometer) if needed.
+  // Propagate and correct (BaseEstimator.step once initialised: ImuBaseEstimator initialises).
   void step(const Eigen::Ref<const Eigen::VectorXd>& angular_velocity_imu_in_imu,
             const Eigen::Ref<const Eigen::VectorXd>& specific_force_imu_in_imu, double dt,
             const std::vector<ContactPoint>& kinematics, const ContactFlags& flags);
