@@ -10,20 +10,22 @@ raise the same error (type, field, words; the numbers in it within the tolerance
 same ticks, and otherwise agree, estimate and filter state (pose, velocity, biases,
 covariance, stance points, time, corners in use), within 1e-8 of each field's scale. Then
 the hand-over between kernels in one estimator, and the session following its
-controller's ``kernel``.
+controller's ``kernel``, threads, and a missing core.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import re
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
+from controller_server.compiled import CompiledCoreUnavailable
 from controller_server.errors import EstimatorInputError
-from controller_server.estimation import EstimatorNoise, ImuBaseEstimator
+from controller_server.estimation import EstimatorNoise, ImuBaseEstimator, compiled_estimator
 from controller_server.models import BUILTIN_MODELS, RobotModel, load_robot_model
 from controller_server.session import Session
 from protocol.messages import Hello, ImuSample, State
@@ -306,3 +308,35 @@ def test_an_unknown_kernel_is_a_value_error():
     estimator = ImuBaseEstimator(robot, Hello(model=robot.name))
     with pytest.raises(ValueError, match="kernel='fast'"):
         estimator(imu_sequence(robot, seed=0)[0], kernel="fast")
+
+
+def test_without_the_core_the_compiled_kernel_says_why_and_the_python_one_goes_on(monkeypatch):
+    def missing():
+        raise CompiledCoreUnavailable("the compiled core cannot be imported (as if not built)")
+
+    monkeypatch.setattr(compiled_estimator, "load_core", missing)
+    robot = load_robot_model("thesis_humanoid")
+    estimator = ImuBaseEstimator(robot, Hello(model=robot.name))
+    states = imu_sequence(robot, seed=0)[:3]
+    estimator(states[0])
+    with pytest.raises(CompiledCoreUnavailable, match="cannot be imported"):
+        estimator(states[1], kernel="compiled")
+    assert estimator(states[1]).covariance.shape == (15, 15)  # never a silent fall back
+
+
+def test_sessions_estimate_in_parallel_threads_as_alone():
+    """The core releases the GIL: two sessions' estimators on two threads, as run alone."""
+    robot = load_robot_model("revolute_humanoid")
+    hello = Hello(model=robot.name, **HELLO_MOUNT)
+    sequences = [imu_sequence(robot, seed=seed)[:300] for seed in (5, 6)]
+
+    def run(states):
+        estimator = ImuBaseEstimator(robot, hello)
+        return [outcome(estimator, state, "compiled") for state in states]
+
+    alone = [run(states) for states in sequences]
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        together = list(pool.map(run, sequences))
+    for expected_run, actual_run in zip(alone, together, strict=True):
+        for tick, (expected, actual) in enumerate(zip(expected_run, actual_run, strict=True)):
+            assert max(gaps_between(expected, actual, tick).values()) == 0.0
