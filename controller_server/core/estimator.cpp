@@ -458,10 +458,16 @@ void BaseEstimator::update() {
           p_ht_.row(0) * point.y() - p_ht_.row(1) * point.x() + p_ht_.row(17 + 3 * i);
     }
   }
-  // K = P Hᵀ S⁻¹ (S is symmetric positive definite).
+  // K = P Hᵀ S⁻¹: S is symmetric positive definite (N is), Cholesky; should round-off have
+  // made it indefinite, LU with partial pivoting, as np.linalg.solve.
   llt_.compute(innovation_covariance_);
   gain_transpose_ = p_ht_.transpose();
-  llt_.solveInPlace(gain_transpose_);
+  if (llt_.info() == Eigen::Success) {
+    llt_.solveInPlace(gain_transpose_);
+  } else {
+    lu_.compute(innovation_covariance_);
+    gain_transpose_ = lu_.solve(p_ht_.transpose());
+  }
   gain_ = gain_transpose_.transpose();
   delta_.noalias() = gain_ * innovation_;
 

@@ -26,6 +26,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
+#include <Eigen/LU>
 
 #include "dynamics_core.hpp"
 #include "leg_kinematics.hpp"
@@ -195,6 +196,7 @@ class BaseEstimator {
   InnovationVector innovation_;
   StateVector delta_;
   Eigen::LLT<InnovationMatrix> llt_;
+  Eigen::PartialPivLU<InnovationMatrix> lu_;
 };
 
 // imu_base.ImuBaseEstimator: one session's tick, from the joints, contact flags and IMU.
