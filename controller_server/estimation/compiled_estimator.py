@@ -37,6 +37,9 @@ __all__ = ["CompiledImuBaseEstimator"]
 class CompiledImuBaseEstimator:
     """One session's estimator tick in C++ (see the module).
 
+    The model, the noise and the priors are copied into C++ at construction: a later change
+    of the Python filter's ``noise`` does not reach this one.
+
     Raises:
         CompiledCoreUnavailable: The core is not built or was built for another Pinocchio.
     """
