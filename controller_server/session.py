@@ -12,7 +12,7 @@ import numpy as np
 
 from controller_server.controllers import create_controller
 from controller_server.errors import ModelMismatch, ServerFault, TickTooCostly
-from controller_server.estimation import ImuBaseEstimator
+from controller_server.estimation import BaseEstimate, ImuBaseEstimator
 from controller_server.models import load_robot_model
 from controller_server.wire import command_from_output, control_input_from_state
 from protocol.errors import ProtocolError
@@ -158,7 +158,7 @@ class Session:
         start = time.perf_counter()
         want_diagnostics = self.ticks % self.diagnostics_period_ticks == 0
         control_input, estimate = control_input_from_state(
-            self.robot, state, want_diagnostics, self.base_estimator
+            self.robot, state, want_diagnostics, self._estimate_base
         )
         output = self.controller.compute(control_input)
         compute_time_s = time.perf_counter() - start
@@ -170,6 +170,15 @@ class Session:
         self._compute_times_s.append(compute_time_s)
         self.ticks += 1
         return command
+
+    def _estimate_base(self, state: State) -> BaseEstimate:
+        """The base estimate of a state with ``imu``, by the controller's ``kernel`` in force.
+
+        One mechanism for the whole tick: the parameter that selects the compiled dynamics
+        terms selects the compiled estimator too, per state (the estimator hands its filter
+        over when it changes).
+        """
+        return self.base_estimator(state, kernel=self.controller.in_force()["kernel"])
 
     def set_params(self, request: SetParams) -> Params:
         """Apply parameters (all or nothing) and return every value in force."""

@@ -8,11 +8,13 @@
 namespace poise {
 
 // Each binds its step's functions and classes into `m` (controller_server._core).
+void bind_estimator(nanobind::module_& m);         // bind_estimator.cpp: the IMU path's filter
 void bind_inverse_dynamics(nanobind::module_& m);  // bind_inverse_dynamics.cpp
 void bind_joint_limits(nanobind::module_& m);      // bind_joint_limits.cpp
 void bind_weighted(nanobind::module_& m);          // bind_weighted.cpp
 
 inline void bind_parts(nanobind::module_& m) {
+  bind_estimator(m);
   bind_inverse_dynamics(m);
   bind_joint_limits(m);
   bind_weighted(m);

@@ -17,6 +17,11 @@ lowest stance foot at ``z = 0``, ``x = y = 0``. Each foot is measured at its sol
 on the ground (:func:`grounded_leg_kinematics`), and re-added to the filter when they
 change. A gap between states longer than :data:`MAX_STATE_GAP_S` cannot be integrated:
 the filter restarts at the next state, and the state of the gap is answered with an error.
+
+Kernel: each call names the kernel that runs it, the session's controller's ``kernel``
+parameter in force (``"python"``: this module, the specification; ``"compiled"``: the same
+tick in C++, :class:`~.compiled_estimator.CompiledImuBaseEstimator`). The filter's state
+follows the kernel from call to call.
 """
 
 from __future__ import annotations
@@ -24,8 +29,10 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from controller_server.dynamics import KERNELS
 from controller_server.errors import EstimatorInputError, ImuFrameError
 from controller_server.estimation.base_estimator import BaseEstimator
+from controller_server.estimation.compiled_estimator import CompiledImuBaseEstimator
 from controller_server.estimation.estimate import BaseEstimate, EstimatorPrior, ImuMount
 from controller_server.estimation.leg_kinematics import grounded_leg_kinematics
 from controller_server.models import RobotModel
@@ -111,15 +118,42 @@ class ImuBaseEstimator:
         self._ahrs_prior = EstimatorPrior(roll_pitch_rad=AHRS_TILT_PRIOR_RAD)
         self._time_s = 0.0
         self._corners: list[tuple[int, ...]] = []
+        self._kernel = "python"  # the side holding the filter's state
+        self._compiled: CompiledImuBaseEstimator | None = None
 
-    def __call__(self, state: State) -> BaseEstimate:
+    def __call__(self, state: State, kernel: str = "python") -> BaseEstimate:
         """The base estimate at ``state.time_s``.
+
+        Args:
+            state: A state carrying ``imu``.
+            kernel: ``"python"``: this module's filter, the specification; ``"compiled"``:
+                the same tick in C++ (:class:`CompiledImuBaseEstimator`, created at its first
+                tick). The session passes its controller's ``kernel`` parameter in force, per
+                call; when it differs from the previous call's, the filter's state (and the
+                time and corners of the previous state) is handed over, so a change of kernel
+                does not restart the filter.
 
         Raises:
             EstimatorInputError: Naming the ``state`` field: time not advancing or a gap
                 (then the filter restarts at the next state), no foot in stance at the
                 start, or a reading the filter refuses.
+            CompiledCoreUnavailable: ``kernel`` is ``"compiled"`` and the core is not built
+                (or was built for another Pinocchio).
+            ValueError: An unknown ``kernel``.
         """
+        if kernel != self._kernel:
+            self._hand_over(kernel)
+        try:
+            if kernel == "compiled":
+                assert self._compiled is not None  # made by the hand-over
+                return self._compiled(state)
+            return self._step(state)
+        except EstimatorInputError as error:
+            field = _WIRE_FIELDS.get(error.field, error.field)
+            raise EstimatorInputError(field, error.detail) from None
+
+    def _step(self, state: State) -> BaseEstimate:
+        """The tick by this module's filter (the specification), with the filter's field names."""
         imu = state.imu
         assert imu is not None
         joint_position = pin.normalize(
@@ -133,41 +167,80 @@ class ImuBaseEstimator:
             estimator.rotation_base_in_world,
             self._corners if estimator.initialized else (),
         )
-        try:
-            if not estimator.initialized:
-                self._initialize(state, kinematics)
-                estimate = estimator.estimate()
-            else:
-                dt = state.time_s - self._time_s
-                if dt > MAX_STATE_GAP_S:
-                    estimator.reset()
-                    raise EstimatorInputError(
-                        "dt",
-                        f"{dt * 1e3:.0f} ms since the previous state, more than "
-                        f"{MAX_STATE_GAP_S * 1e3:.0f} ms: the base estimator restarts at the "
-                        "next state (the robot should then stand still on its flagged feet)",
-                    )
-                if not dt > 0:
-                    raise EstimatorInputError(
-                        "dt", f"time_s {state.time_s} does not advance from {self._time_s}"
-                    )
-                # A foot whose corners on the ground changed stands on another point now.
-                estimator.forget_contacts(
-                    [k for k, used in enumerate(corners) if used != self._corners[k]]
+        if not estimator.initialized:
+            self._initialize(state, kinematics)
+            estimate = estimator.estimate()
+        else:
+            dt = state.time_s - self._time_s
+            if dt > MAX_STATE_GAP_S:
+                estimator.reset()
+                raise EstimatorInputError(
+                    "dt",
+                    f"{dt * 1e3:.0f} ms since the previous state, more than "
+                    f"{MAX_STATE_GAP_S * 1e3:.0f} ms: the base estimator restarts at the "
+                    "next state (the robot should then stand still on its flagged feet)",
                 )
-                estimate = estimator.step(
-                    imu.angular_velocity_imu_in_imu,
-                    imu.linear_acceleration_imu_in_imu,
-                    dt,
-                    kinematics,
-                    state.contact_flags,
+            if not dt > 0:
+                raise EstimatorInputError(
+                    "dt", f"time_s {state.time_s} does not advance from {self._time_s}"
                 )
-        except EstimatorInputError as error:
-            field = _WIRE_FIELDS.get(error.field, error.field)
-            raise EstimatorInputError(field, error.detail) from None
+            # A foot whose corners on the ground changed stands on another point now.
+            estimator.forget_contacts(
+                [k for k, used in enumerate(corners) if used != self._corners[k]]
+            )
+            estimate = estimator.step(
+                imu.angular_velocity_imu_in_imu,
+                imu.linear_acceleration_imu_in_imu,
+                dt,
+                kinematics,
+                state.contact_flags,
+            )
         self._time_s = state.time_s
         self._corners = corners
         return estimate
+
+    def _hand_over(self, kernel: str) -> None:
+        """Move the filter's state to ``kernel``'s side (the other side's goes stale)."""
+        if kernel not in KERNELS:
+            raise ValueError(f"{kernel=} is not one of {', '.join(KERNELS)}")
+        estimator = self.estimator
+        if kernel == "compiled":
+            if self._compiled is None:
+                self._compiled = CompiledImuBaseEstimator(
+                    self.robot,
+                    self.mount,
+                    estimator.noise,
+                    self._level_prior,
+                    self._ahrs_prior,
+                    gravity=-float(estimator._gravity[2]),
+                    max_state_gap_s=MAX_STATE_GAP_S,
+                )
+            self._compiled.set_state(
+                {
+                    "rotation": estimator._rotation,
+                    "columns": estimator._columns,
+                    "bias": estimator._bias,
+                    "covariance": estimator._covariance,
+                    "stance": list(estimator._stance),
+                    "gyro_reading": estimator._gyro_reading,
+                    "initialized": estimator.initialized,
+                    "time_s": self._time_s,
+                    "corners": list(self._corners),
+                }
+            )
+        else:
+            assert self._compiled is not None  # the compiled side held the state
+            values = self._compiled.state()
+            estimator._rotation = values["rotation"]
+            estimator._columns = values["columns"]
+            estimator._bias = values["bias"]
+            estimator._covariance = values["covariance"]
+            estimator._stance = list(values["stance"])
+            estimator._gyro_reading = values["gyro_reading"]
+            estimator.initialized = values["initialized"]
+            self._time_s = values["time_s"]
+            self._corners = list(values["corners"])
+        self._kernel = kernel
 
     def _initialize(self, state: State, kinematics) -> None:
         imu = state.imu
