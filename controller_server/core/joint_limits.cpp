@@ -79,31 +79,59 @@ std::string joint_context(const std::string& name) { return "joint '" + name + "
   throw std::invalid_argument(message.str());
 }
 
+// How numpy rounds a face normal's projection n · a' (see the top of this file).
+enum class Rounding {
+  kMatVec,  // `normals @ direction` (SwingCone.contains_unit): OpenBLAS dgemv
+  kEinsum,  // einsum("bsk,bk->bs") (swing_twist.cones_contain_units): (n₀a₀ + n₂a₂) + n₁a₁
+};
+
+double projection_like_numpy(const double* normal, const double* direction, Rounding rounding) {
+  if (rounding == Rounding::kMatVec) return row_dot_like_numpy(normal, direction);
+  return (normal[0] * direction[0] + normal[2] * direction[2]) + normal[1] * direction[1];
+}
+
+struct ConeTest {
+  bool contains;
+  bool near_tiny;  // some n · a' was within kBand of _TINY
+};
+
 // SwingCone.contains_unit: a' · n_i ≤ 0 for every face (convex), for some face (reflex),
 // with _TINY of slack (Macchietto 2008, §6.2; the thesis's "< π" is a typo for "≤ 0").
 // As numpy's max / min, a NaN projection means "not contained".
-template <bool LikeNumpy>
-bool contains_unit(const BallLimit& ball, const double* direction) {
+//
+// Where a' · n_i is within kBand of _TINY the projection is rounded as numpy's, so that
+// the yes/no is the Python's there (just outside, the exact error is ~_TINY, not 0).
+// Elsewhere plain arithmetic decides the same at a third of the cost (std::fma is a call
+// on the baseline x86-64 this builds for): the roundings of unit n · unit a' differ by a
+// few 1e-16.
+constexpr double kBand = 1e-14;
+
+ConeTest contains_unit(const BallLimit& ball, const double* direction, Rounding rounding) {
   const UnitVectors& normals = ball.face_normals_in_parent;
-  if (normals.rows() == 0) return true;
-  bool every = true, some = false, nan = false;
+  if (normals.rows() == 0) return {true, false};
+  bool every = true, some = false, nan = false, near_tiny = false;
   for (Eigen::Index i = 0; i < normals.rows(); ++i) {
     const double* n = normals.row(i).data();
-    const double projection = LikeNumpy ? row_dot_like_numpy(n, direction)
-                                        : n[0] * direction[0] + n[1] * direction[1] +
-                                              n[2] * direction[2];
+    double projection = n[0] * direction[0] + n[1] * direction[1] + n[2] * direction[2];
+    if (std::abs(projection - kTiny) < kBand) {
+      projection = projection_like_numpy(n, direction, rounding);
+      near_tiny = true;
+    }
     const bool inside = projection <= kTiny;
     every = every && inside;
     some = some || inside;
     nan = nan || std::isnan(projection);
   }
-  return ball.reflex ? (some && !nan) : every;
+  return {ball.reflex ? (some && !nan) : every, near_tiny};
 }
 
-// BallJointLimit._within: the cheap test that e_axis and e_twist are both 0, in the
-// Python's scalar arithmetic. Its answer only decides whether the exact error runs (which
-// is 0 inside, continuous across the boundary). A zero quaternion throws (Python's
-// ZeroDivisionError); NaN gives false, and the exact error then throws.
+// The cheap test that e_axis and e_twist are both 0: BallJointLimit._within, in the
+// Python's scalar arithmetic. Its answer only decides whether the exact error runs (0
+// inside, continuous across the boundary). JointLimitSet.errors runs the same test on all
+// joints at once (_balls_within), rounded otherwise, before _within: where the two
+// roundings can disagree (a' · n_i ≈ _TINY) that one is taken too, inside if either says
+// so, as in Python. A zero quaternion throws (Python's ZeroDivisionError); NaN gives
+// false, and the exact error then throws.
 bool within(const BallLimit& ball, const double* quaternion_xyzw) {
   double x = quaternion_xyzw[0], y = quaternion_xyzw[1], z = quaternion_xyzw[2],
          w = quaternion_xyzw[3];
@@ -115,11 +143,6 @@ bool within(const BallLimit& ball, const double* quaternion_xyzw) {
   w = w / norm;
   const double ax = ball.bone_axis_in_parent[0], ay = ball.bone_axis_in_parent[1],
                az = ball.bone_axis_in_parent[2];
-  // a' = a + w t + u × t with t = 2 u × a (rotation of the bone axis).
-  const double tx = 2 * (y * az - z * ay), ty = 2 * (z * ax - x * az),
-               tz = 2 * (x * ay - y * ax);
-  const double bone[3] = {ax + w * tx + y * tz - z * ty, ay + w * ty + z * tx - x * tz,
-                          az + w * tz + x * ty - y * tx};
   // Twist angle about a: 2 atan2(u · a, w), wrapped to (−π, π].
   double twist = 2.0 * std::atan2(x * ax + y * ay + z * az, w);
   if (twist > kPi) {
@@ -127,8 +150,18 @@ bool within(const BallLimit& ball, const double* quaternion_xyzw) {
   } else if (twist <= -kPi) {
     twist = twist + 2 * kPi;
   }
-  return ball.twist_lower_rad <= twist && twist <= ball.twist_upper_rad &&
-         contains_unit<false>(ball, bone);
+  if (!(ball.twist_lower_rad <= twist && twist <= ball.twist_upper_rad)) return false;
+  // a' = a + w t + u × t with t = 2 u × a (rotation of the bone axis).
+  const double tx = 2 * (y * az - z * ay), ty = 2 * (z * ax - x * az),
+               tz = 2 * (x * ay - y * ax);
+  const double bone[3] = {ax + w * tx + y * tz - z * ty, ay + w * ty + z * tx - x * tz,
+                          az + w * tz + x * ty - y * tx};
+  const ConeTest test = contains_unit(ball, bone, Rounding::kMatVec);
+  if (test.contains || !test.near_tiny) return test.contains;
+  // _balls_within's a' = (a + w t) + (u × t), and its einsum.
+  const double bone_at_once[3] = {ax + w * tx + (y * tz - z * ty), ay + w * ty + (z * tx - x * tz),
+                                  az + w * tz + (x * ty - y * tx)};
+  return contains_unit(ball, bone_at_once, Rounding::kEinsum).contains;
 }
 
 // swing_twist.rotate: q v q⁻¹ for a unit quaternion, as v + w t + u × t with t = 2 u × v.
@@ -161,7 +194,7 @@ double cone_violation(const BallLimit& ball, const double* bone_direction) {
   if (normals.rows() == 0) return 0.0;
   double d_for_contains[3];  // SwingCone.contains normalises d once more
   unit_like_numpy<3>(d, d_for_contains);
-  if (contains_unit<true>(ball, d_for_contains)) return 0.0;
+  if (contains_unit(ball, d_for_contains, Rounding::kMatVec).contains) return 0.0;
   const Eigen::Index faces = normals.rows();
   if (ball.reflex) {
     // d is inside the convex forbidden cone: its nearest boundary point is on the nearest
