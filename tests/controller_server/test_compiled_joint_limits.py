@@ -5,13 +5,15 @@ violation per DoF of Macchietto 2008, §6.2 in C++. Per built-in model, and for 
 limits with hand-built cones (irregular convex, reflex, none), on 1,200 seeded configurations
 biased to the limits: inside, on, just past and far past each box; swings to a cone's boundary
 ± 1e-12 … 0.5 rad toward random directions, its edges and its face centres; twists at and past
-their bounds and at half turns; the degenerate swing–twist cases (a half turn about an axis ⊥
-the bone, and near it); swings near π; quaternions neither unit nor sign-normalised. The two
-agree to 1e-12 rad, plus, where the error is a small distance to a convex cone's edge ray
-(``acos(e · d)`` near 1), the rounding of ``e · d`` amplified by that ``acos``: ``1e-15 / e``.
-The C++ sums those products in the order of this machine's OpenBLAS kernels (what numpy calls),
-so here they agree to ~1e-15 everywhere (printed by ``-s``); the allowance is for other CPUs.
-Bad values fail as in Python.
+their bounds and near half turns; the degenerate swing–twist cases (a half turn about an axis
+⊥ the bone, and near one); swings near π; quaternions neither unit nor sign-normalised.
+
+The two agree to 1e-12 (rad, or m), plus, on a ball joint, the rounding of a dot product
+amplified by the two ill-conditioned steps of the specification (``rounding_allowance``: an
+``acos`` near 1, and the twist near a half turn ⊥ the bone). That rounding depends on the BLAS
+kernel numpy calls; the C++ sums in the order of this machine's (OpenBLAS on AVX-512), and
+here they agree to ~1e-15 everywhere (``-s`` prints the worst); with plain sums they differ by
+up to 1.5e-8, within the allowance. Bad values fail as in Python.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from controller_server.features.joint_limits import (
     RevoluteJointLimit,
     default_joint_limits,
 )
-from controller_server.features.swing_twist import SwingCone, compose
+from controller_server.features.swing_twist import SwingCone, compose, rotate
 from controller_server.models import load_robot_model
 from tests.controller_server.test_compiled_core import MODEL_NAMES, random_states
 from tests.controller_server.test_joint_limits import (
@@ -38,7 +40,7 @@ from tests.controller_server.test_joint_limits import (
 
 CONFIGURATIONS = 1200
 TOLERANCE = 1e-12  # rad (m for prismatic joints)
-ACOS_ROUNDING = 1e-15  # a few ulp of e · d near 1, times acos' = 1 / sin(e)
+ROUNDING = 1e-15  # a few ulp of a dot product of unit vectors (rounding_allowance)
 OFFSETS = (0.0, 1e-12, 1e-9, 1e-6, 1e-3, 0.05, 0.5)  # rad (m) past (or short of) a bound
 
 
@@ -128,21 +130,43 @@ def biased_configurations(robot_q: list[np.ndarray], limits, count: int, seed: i
     return configurations
 
 
+def rounding_allowance(limit_set: JointLimitSet, q: np.ndarray, dof: int) -> float:
+    """How much more than ``TOLERANCE`` the two may differ at ``dof`` (module docstring).
+
+    Two steps of a ball joint's error are ill conditioned, so that a rounding ``δ`` of a dot
+    product, which depends on the BLAS kernel, is amplified. The distance to a convex cone's
+    edge ray, ``acos(e · d)``, moves by ``δ / e_axis``, and by at most ``√(2δ)`` (1.5e-8 rad
+    for one ulp) as ``e_axis`` goes to 0. The twist, from ``(u · a, w) / ‖(u · a, w)‖``,
+    moves by ``δ / ‖(u · a, w)‖`` near a half turn about an axis ⊥ ``a`` (eq. 6.4's
+    singularity, where the swing–twist split is the identity below 1e-9).
+    """
+    limit = next(x for x in limit_set.limits if x.idx_v <= dof < x.idx_v + x.nv)
+    if not isinstance(limit, BallJointLimit):
+        return 0.0
+    quaternion = unit(q[limit.idx_q : limit.idx_q + 4])
+    axis_error = limit.cone.violation(rotate(quaternion, limit.bone_axis_in_parent))
+    near_zero = math.sqrt(2.0 * ROUNDING)
+    axis = min(ROUNDING / axis_error, near_zero) if axis_error > 0.0 else near_zero
+    twist_norm = math.hypot(quaternion[:3] @ limit.bone_axis_in_parent, quaternion[3])
+    return axis + ROUNDING / twist_norm
+
+
 def assert_agreement(limit_set: JointLimitSet, configurations, label: str) -> None:
     """``errors(q)`` of both within the tolerance of the module docstring; prints the worst."""
     compiled = limit_set.compiled()
-    worst, worst_excess, outside = 0.0, -math.inf, 0
+    worst, outside = 0.0, 0
     for q in configurations:
         expected = limit_set.errors(q)
-        got = compiled.errors(q)
-        difference = np.abs(got - expected)
-        largest = np.maximum(expected, got)
-        allowance = np.divide(ACOS_ROUNDING, largest, out=np.zeros_like(largest), where=largest > 0)
+        difference = np.abs(compiled.errors(q) - expected)
         worst = max(worst, float(difference.max(initial=0.0)))
-        worst_excess = max(worst_excess, float((difference - TOLERANCE - allowance).max()))
+        for dof in np.flatnonzero(difference > TOLERANCE).tolist():
+            assert difference[dof] <= TOLERANCE + rounding_allowance(limit_set, q, dof), (
+                label,
+                q,
+                dof,
+            )
         outside += int(np.count_nonzero(expected))
     print(f"{label}: worst |compiled − python| {worst:.3g} over {len(configurations)} q")
-    assert worst_excess <= 0.0, (label, worst, worst_excess)
     assert outside > len(configurations)  # many limits were past, not only inside
 
 
