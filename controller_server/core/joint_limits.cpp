@@ -1,13 +1,16 @@
 // Soft joint-limit errors (Macchietto 2008, §6.2, eq. 6.4–6.6): see joint_limits.hpp.
 //
 // Each function mirrors one Python function, named in its comment, step by step, so that
-// the two agree to rounding. Two details keep them closer than that:
-// - The Python's vector products `a @ b` go through numpy to OpenBLAS, which accumulates
-//   with fused multiply-adds (dot_like_numpy, row_dot_like_numpy). Where the result is a
-//   value (not only a yes/no), the same order is used here: the edge distance acos(e · d)
-//   turns a 1-ulp difference in e · d into ~1e-16 / e_axis rad, 1e-10 at e_axis = 1e-6.
-// - The plain arithmetic is compiled with -ffp-contract=off (CMakeLists.txt), as numpy
-//   rounds every product and sum.
+// the two agree to rounding. Two steps of the specification are ill conditioned: the
+// distance to a convex cone's edge ray, acos(e · d) near 1, and the twist near a half turn
+// about an axis ⊥ the bone (eq. 6.4's singularity). There one ulp of a dot product moves
+// the error by up to 1.5e-8 rad. So where a dot product gives a value (not only a yes/no),
+// it is rounded as numpy's: numpy's `a @ b` calls OpenBLAS, whose kernels on this machine
+// (scipy-openblas 0.3.31, AVX-512) sum with fused multiply-adds in the orders of
+// dot_like_numpy and row_dot_like_numpy. With them the two agree to 9e-16 (numpy's own
+// arctan2 and arccos against glibc's), with plain sums to 1.5e-8; a BLAS that sums
+// otherwise stays within the agreement test's allowance. The plain arithmetic is compiled
+// with -ffp-contract=off (CMakeLists.txt), as numpy rounds every product and sum.
 #include "joint_limits.hpp"
 
 #include <algorithm>
@@ -203,7 +206,10 @@ double cone_violation(const BallLimit& ball, const double* bone_direction) {
     double least = row_dot_like_numpy(normals.row(0).data(), d);
     for (Eigen::Index i = 1; i < faces; ++i) {
       const double projection = row_dot_like_numpy(normals.row(i).data(), d);
-      if (projection < least) face = i, least = projection;
+      if (projection < least) {
+        face = i;
+        least = projection;
+      }
     }
     return angle_to_plane(d, normals.row(face).data(), least);
   }
@@ -212,7 +218,8 @@ double cone_violation(const BallLimit& ball, const double* bone_direction) {
   // min_i acos(clip(e_i · d)) is acos of the largest e_i · d (acos decreases).
   double closest_edge = -std::numeric_limits<double>::infinity();
   for (Eigen::Index i = 0; i < ball.edges_in_parent.rows(); ++i) {
-    closest_edge = std::max(closest_edge, row_dot_like_numpy(ball.edges_in_parent.row(i).data(), d));
+    const double cosine = row_dot_like_numpy(ball.edges_in_parent.row(i).data(), d);
+    closest_edge = std::max(closest_edge, cosine);
   }
   double nearest = std::acos(std::clamp(closest_edge, -1.0, 1.0));
   Eigen::Index face = -1;
@@ -231,7 +238,10 @@ double cone_violation(const BallLimit& ball, const double* bone_direction) {
       farthest_side = std::max(farthest_side, foot[0] * m[0] + foot[1] * m[1] + foot[2] * m[2]);
     }
     const bool on_cone = farthest_side <= kOnConeTolerance * foot_length;
-    if (on_cone && (face < 0 || projection < face_projection)) face = i, face_projection = projection;
+    if (on_cone && (face < 0 || projection < face_projection)) {
+      face = i;
+      face_projection = projection;
+    }
   }
   if (face >= 0) {
     nearest = std::min(nearest, angle_to_plane(d, normals.row(face).data(), face_projection));
@@ -257,7 +267,10 @@ double twist_angle(const double* q, const Eigen::Vector3d& axis) {
   double t[4];
   unit_like_numpy<4>(twist, t);  // ‖twist‖ = 1 to rounding: never fails
   double twist_along = dot_like_numpy(t, axis.data(), 3), w = t[3];
-  if (w < 0.0) twist_along = -twist_along, w = -w;  // q and −q are the same rotation
+  if (w < 0.0) {  // q and −q are the same rotation
+    twist_along = -twist_along;
+    w = -w;
+  }
   const double angle = 2.0 * std::atan2(twist_along, w);
   return angle <= -kPi ? kPi : angle;
 }
@@ -299,13 +312,15 @@ JointLimits::JointLimits(Eigen::Index nv, std::vector<BoxLimit> boxes, std::vect
                                   std::to_string(faces));
     }
     if (!ball.face_normals_in_parent.allFinite() || !ball.edges_in_parent.allFinite()) {
-      throw std::invalid_argument(joint_context(ball.name) + "face normals and edges must be finite");
+      throw std::invalid_argument(joint_context(ball.name) +
+                                  "face normals and edges must be finite");
     }
     const Eigen::Index edges = (ball.reflex || faces == 0) ? 0 : faces;
     if (ball.edges_in_parent.rows() != edges) {
       throw std::invalid_argument(
           joint_context(ball.name) + "need " + std::to_string(edges) +
-          " edges (SwingCone.edges_in_parent: one per face of a convex cone, none if reflex), got " +
+          " edges (SwingCone.edges_in_parent: one per face of a convex cone, none if "
+          "reflex), got " +
           std::to_string(ball.edges_in_parent.rows()));
     }
     if (!(ball.twist_lower_rad < ball.twist_upper_rad)) {
@@ -322,7 +337,9 @@ double JointLimits::ball_error(std::size_t index, const Eigen::Vector4d& quatern
   const BallLimit& ball = balls_.at(index);
   if (within(ball, quaternion_xyzw.data())) return 0.0;
   double q[4];
-  if (!unit_like_numpy<4>(quaternion_xyzw.data(), q)) throw_bad_quaternion(ball, quaternion_xyzw.data());
+  if (!unit_like_numpy<4>(quaternion_xyzw.data(), q)) {
+    throw_bad_quaternion(ball, quaternion_xyzw.data());
+  }
   double bone_direction[3];  // a' = q a q⁻¹
   rotate(q, ball.bone_axis_in_parent, bone_direction);
   const double axis_error_rad = cone_violation(ball, bone_direction);
