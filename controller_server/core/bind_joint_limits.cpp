@@ -38,8 +38,9 @@ ErrorsArray errors(const JointLimits& limits, const Eigen::Ref<const Eigen::Vect
 }  // namespace
 
 void bind_joint_limits(nb::module_& m) {
-  nb::class_<BoxLimit>(m, "BoxLimit",
-                       "A 1-DoF joint's box [lower, upper] (features.joint_limits.RevoluteJointLimit).")
+  nb::class_<BoxLimit>(
+      m, "BoxLimit",
+      "A 1-DoF joint's box [lower, upper] (features.joint_limits.RevoluteJointLimit).")
       .def(
           "__init__",
           [](BoxLimit* self, std::string name, Eigen::Index idx_q, Eigen::Index idx_v,

@@ -1,13 +1,16 @@
 // Soft joint-limit errors (Macchietto 2008, §6.2, eq. 6.4–6.6): see joint_limits.hpp.
 //
 // Each function mirrors one Python function, named in its comment, step by step, so that
-// the two agree to rounding. Two details keep them closer than that:
-// - The Python's vector products `a @ b` go through numpy to OpenBLAS, which accumulates
-//   with fused multiply-adds (dot_like_numpy, row_dot_like_numpy). Where the result is a
-//   value (not only a yes/no), the same order is used here: the edge distance acos(e · d)
-//   turns a 1-ulp difference in e · d into ~1e-16 / e_axis rad, 1e-10 at e_axis = 1e-6.
-// - The plain arithmetic is compiled with -ffp-contract=off (CMakeLists.txt), as numpy
-//   rounds every product and sum.
+// the two agree to rounding. Two steps of the specification are ill conditioned: the
+// distance to a convex cone's edge ray, acos(e · d) near 1, and the twist near a half turn
+// about an axis ⊥ the bone (eq. 6.4's singularity). There one ulp of a dot product moves
+// the error by up to 1.5e-8 rad. So where a dot product gives a value (not only a yes/no),
+// it is rounded as numpy's: numpy's `a @ b` calls OpenBLAS, whose kernels on this machine
+// (scipy-openblas 0.3.31, AVX-512) sum with fused multiply-adds in the orders of
+// dot_like_numpy and row_dot_like_numpy. With them the two agree to 9e-16 (numpy's own
+// arctan2 and arccos against glibc's), with plain sums to 1.5e-8; a BLAS that sums
+// otherwise stays within the agreement test's allowance. The plain arithmetic is compiled
+// with -ffp-contract=off (CMakeLists.txt), as numpy rounds every product and sum.
 #include "joint_limits.hpp"
 
 #include <algorithm>
@@ -79,31 +82,59 @@ std::string joint_context(const std::string& name) { return "joint '" + name + "
   throw std::invalid_argument(message.str());
 }
 
+// How numpy rounds a face normal's projection n · a' (see the top of this file).
+enum class Rounding {
+  kMatVec,  // `normals @ direction` (SwingCone.contains_unit): OpenBLAS dgemv
+  kEinsum,  // einsum("bsk,bk->bs") (swing_twist.cones_contain_units): (n₀a₀ + n₂a₂) + n₁a₁
+};
+
+double projection_like_numpy(const double* normal, const double* direction, Rounding rounding) {
+  if (rounding == Rounding::kMatVec) return row_dot_like_numpy(normal, direction);
+  return (normal[0] * direction[0] + normal[2] * direction[2]) + normal[1] * direction[1];
+}
+
+struct ConeTest {
+  bool contains;
+  bool near_tiny;  // some n · a' was within kBand of _TINY
+};
+
 // SwingCone.contains_unit: a' · n_i ≤ 0 for every face (convex), for some face (reflex),
 // with _TINY of slack (Macchietto 2008, §6.2; the thesis's "< π" is a typo for "≤ 0").
 // As numpy's max / min, a NaN projection means "not contained".
-template <bool LikeNumpy>
-bool contains_unit(const BallLimit& ball, const double* direction) {
+//
+// Where a' · n_i is within kBand of _TINY the projection is rounded as numpy's, so that
+// the yes/no is the Python's there (just outside, the exact error is ~_TINY, not 0).
+// Elsewhere plain arithmetic decides the same at a third of the cost (std::fma is a call
+// on the baseline x86-64 this builds for): the roundings of unit n · unit a' differ by a
+// few 1e-16.
+constexpr double kBand = 1e-14;
+
+ConeTest contains_unit(const BallLimit& ball, const double* direction, Rounding rounding) {
   const UnitVectors& normals = ball.face_normals_in_parent;
-  if (normals.rows() == 0) return true;
-  bool every = true, some = false, nan = false;
+  if (normals.rows() == 0) return {true, false};
+  bool every = true, some = false, nan = false, near_tiny = false;
   for (Eigen::Index i = 0; i < normals.rows(); ++i) {
     const double* n = normals.row(i).data();
-    const double projection = LikeNumpy ? row_dot_like_numpy(n, direction)
-                                        : n[0] * direction[0] + n[1] * direction[1] +
-                                              n[2] * direction[2];
+    double projection = n[0] * direction[0] + n[1] * direction[1] + n[2] * direction[2];
+    if (std::abs(projection - kTiny) < kBand) {
+      projection = projection_like_numpy(n, direction, rounding);
+      near_tiny = true;
+    }
     const bool inside = projection <= kTiny;
     every = every && inside;
     some = some || inside;
     nan = nan || std::isnan(projection);
   }
-  return ball.reflex ? (some && !nan) : every;
+  return {ball.reflex ? (some && !nan) : every, near_tiny};
 }
 
-// BallJointLimit._within: the cheap test that e_axis and e_twist are both 0, in the
-// Python's scalar arithmetic. Its answer only decides whether the exact error runs (which
-// is 0 inside, continuous across the boundary). A zero quaternion throws (Python's
-// ZeroDivisionError); NaN gives false, and the exact error then throws.
+// The cheap test that e_axis and e_twist are both 0: BallJointLimit._within, in the
+// Python's scalar arithmetic. Its answer only decides whether the exact error runs (0
+// inside, continuous across the boundary). JointLimitSet.errors runs the same test on all
+// joints at once (_balls_within), rounded otherwise, before _within: where the two
+// roundings can disagree (a' · n_i ≈ _TINY) that one is taken too, inside if either says
+// so, as in Python. A zero quaternion throws (Python's ZeroDivisionError); NaN gives
+// false, and the exact error then throws.
 bool within(const BallLimit& ball, const double* quaternion_xyzw) {
   double x = quaternion_xyzw[0], y = quaternion_xyzw[1], z = quaternion_xyzw[2],
          w = quaternion_xyzw[3];
@@ -115,11 +146,6 @@ bool within(const BallLimit& ball, const double* quaternion_xyzw) {
   w = w / norm;
   const double ax = ball.bone_axis_in_parent[0], ay = ball.bone_axis_in_parent[1],
                az = ball.bone_axis_in_parent[2];
-  // a' = a + w t + u × t with t = 2 u × a (rotation of the bone axis).
-  const double tx = 2 * (y * az - z * ay), ty = 2 * (z * ax - x * az),
-               tz = 2 * (x * ay - y * ax);
-  const double bone[3] = {ax + w * tx + y * tz - z * ty, ay + w * ty + z * tx - x * tz,
-                          az + w * tz + x * ty - y * tx};
   // Twist angle about a: 2 atan2(u · a, w), wrapped to (−π, π].
   double twist = 2.0 * std::atan2(x * ax + y * ay + z * az, w);
   if (twist > kPi) {
@@ -127,8 +153,18 @@ bool within(const BallLimit& ball, const double* quaternion_xyzw) {
   } else if (twist <= -kPi) {
     twist = twist + 2 * kPi;
   }
-  return ball.twist_lower_rad <= twist && twist <= ball.twist_upper_rad &&
-         contains_unit<false>(ball, bone);
+  if (!(ball.twist_lower_rad <= twist && twist <= ball.twist_upper_rad)) return false;
+  // a' = a + w t + u × t with t = 2 u × a (rotation of the bone axis).
+  const double tx = 2 * (y * az - z * ay), ty = 2 * (z * ax - x * az),
+               tz = 2 * (x * ay - y * ax);
+  const double bone[3] = {ax + w * tx + y * tz - z * ty, ay + w * ty + z * tx - x * tz,
+                          az + w * tz + x * ty - y * tx};
+  const ConeTest test = contains_unit(ball, bone, Rounding::kMatVec);
+  if (test.contains || !test.near_tiny) return test.contains;
+  // _balls_within's a' = (a + w t) + (u × t), and its einsum.
+  const double bone_at_once[3] = {ax + w * tx + (y * tz - z * ty), ay + w * ty + (z * tx - x * tz),
+                                  az + w * tz + (x * ty - y * tx)};
+  return contains_unit(ball, bone_at_once, Rounding::kEinsum).contains;
 }
 
 // swing_twist.rotate: q v q⁻¹ for a unit quaternion, as v + w t + u × t with t = 2 u × v.
@@ -161,7 +197,7 @@ double cone_violation(const BallLimit& ball, const double* bone_direction) {
   if (normals.rows() == 0) return 0.0;
   double d_for_contains[3];  // SwingCone.contains normalises d once more
   unit_like_numpy<3>(d, d_for_contains);
-  if (contains_unit<true>(ball, d_for_contains)) return 0.0;
+  if (contains_unit(ball, d_for_contains, Rounding::kMatVec).contains) return 0.0;
   const Eigen::Index faces = normals.rows();
   if (ball.reflex) {
     // d is inside the convex forbidden cone: its nearest boundary point is on the nearest
@@ -170,7 +206,10 @@ double cone_violation(const BallLimit& ball, const double* bone_direction) {
     double least = row_dot_like_numpy(normals.row(0).data(), d);
     for (Eigen::Index i = 1; i < faces; ++i) {
       const double projection = row_dot_like_numpy(normals.row(i).data(), d);
-      if (projection < least) face = i, least = projection;
+      if (projection < least) {
+        face = i;
+        least = projection;
+      }
     }
     return angle_to_plane(d, normals.row(face).data(), least);
   }
@@ -179,7 +218,8 @@ double cone_violation(const BallLimit& ball, const double* bone_direction) {
   // min_i acos(clip(e_i · d)) is acos of the largest e_i · d (acos decreases).
   double closest_edge = -std::numeric_limits<double>::infinity();
   for (Eigen::Index i = 0; i < ball.edges_in_parent.rows(); ++i) {
-    closest_edge = std::max(closest_edge, row_dot_like_numpy(ball.edges_in_parent.row(i).data(), d));
+    const double cosine = row_dot_like_numpy(ball.edges_in_parent.row(i).data(), d);
+    closest_edge = std::max(closest_edge, cosine);
   }
   double nearest = std::acos(std::clamp(closest_edge, -1.0, 1.0));
   Eigen::Index face = -1;
@@ -198,7 +238,10 @@ double cone_violation(const BallLimit& ball, const double* bone_direction) {
       farthest_side = std::max(farthest_side, foot[0] * m[0] + foot[1] * m[1] + foot[2] * m[2]);
     }
     const bool on_cone = farthest_side <= kOnConeTolerance * foot_length;
-    if (on_cone && (face < 0 || projection < face_projection)) face = i, face_projection = projection;
+    if (on_cone && (face < 0 || projection < face_projection)) {
+      face = i;
+      face_projection = projection;
+    }
   }
   if (face >= 0) {
     nearest = std::min(nearest, angle_to_plane(d, normals.row(face).data(), face_projection));
@@ -224,7 +267,10 @@ double twist_angle(const double* q, const Eigen::Vector3d& axis) {
   double t[4];
   unit_like_numpy<4>(twist, t);  // ‖twist‖ = 1 to rounding: never fails
   double twist_along = dot_like_numpy(t, axis.data(), 3), w = t[3];
-  if (w < 0.0) twist_along = -twist_along, w = -w;  // q and −q are the same rotation
+  if (w < 0.0) {  // q and −q are the same rotation
+    twist_along = -twist_along;
+    w = -w;
+  }
   const double angle = 2.0 * std::atan2(twist_along, w);
   return angle <= -kPi ? kPi : angle;
 }
@@ -266,13 +312,15 @@ JointLimits::JointLimits(Eigen::Index nv, std::vector<BoxLimit> boxes, std::vect
                                   std::to_string(faces));
     }
     if (!ball.face_normals_in_parent.allFinite() || !ball.edges_in_parent.allFinite()) {
-      throw std::invalid_argument(joint_context(ball.name) + "face normals and edges must be finite");
+      throw std::invalid_argument(joint_context(ball.name) +
+                                  "face normals and edges must be finite");
     }
     const Eigen::Index edges = (ball.reflex || faces == 0) ? 0 : faces;
     if (ball.edges_in_parent.rows() != edges) {
       throw std::invalid_argument(
           joint_context(ball.name) + "need " + std::to_string(edges) +
-          " edges (SwingCone.edges_in_parent: one per face of a convex cone, none if reflex), got " +
+          " edges (SwingCone.edges_in_parent: one per face of a convex cone, none if "
+          "reflex), got " +
           std::to_string(ball.edges_in_parent.rows()));
     }
     if (!(ball.twist_lower_rad < ball.twist_upper_rad)) {
@@ -289,7 +337,9 @@ double JointLimits::ball_error(std::size_t index, const Eigen::Vector4d& quatern
   const BallLimit& ball = balls_.at(index);
   if (within(ball, quaternion_xyzw.data())) return 0.0;
   double q[4];
-  if (!unit_like_numpy<4>(quaternion_xyzw.data(), q)) throw_bad_quaternion(ball, quaternion_xyzw.data());
+  if (!unit_like_numpy<4>(quaternion_xyzw.data(), q)) {
+    throw_bad_quaternion(ball, quaternion_xyzw.data());
+  }
   double bone_direction[3];  // a' = q a q⁻¹
   rotate(q, ball.bone_axis_in_parent, bone_direction);
   const double axis_error_rad = cone_violation(ball, bone_direction);
