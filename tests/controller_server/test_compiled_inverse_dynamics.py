@@ -451,6 +451,14 @@ def test_bad_sizes_are_a_value_error(robot):
         solver.solve(terms, np.zeros(model.nv - 1), (True, True), frictions(robot))
     with pytest.raises(ValueError, match="expected nv"):
         solver.solve(terms, np.zeros(model.nv), (True,), frictions(robot))
+    narrow = (terms.support_jacobians[0][:, :-1], *terms.support_jacobians[1:])
+    with pytest.raises(ValueError, match="sizes differ"):
+        solver.solve(
+            corrupt(terms, support_jacobians=narrow),
+            np.zeros(model.nv),
+            (True, True),
+            frictions(robot),
+        )
     with pytest.raises(ValueError, match="expected nv"):
         solver.solve(
             terms, np.zeros(model.nv), (True, True), frictions(robot), measured_wrenches=np.zeros(6)
