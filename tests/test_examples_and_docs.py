@@ -117,6 +117,7 @@ def test_hello_client_example_runs(server):
         ("bridge.py", ["--count", "40", "--chunks", "2"]),
         ("estimator.py", ["--ticks", "60", "--chunks", "2"]),
         ("dynamics_core.py", ["--calls", "200", "--chunks", "2"]),
+        ("inverse_dynamics_core.py", ["--calls", "200", "--chunks", "2"]),
     ],
 )
 def test_benchmarks_run_and_print_ratios(script, args):
