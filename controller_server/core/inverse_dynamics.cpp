@@ -487,7 +487,8 @@ bool InverseDynamics::condensed_motion(SupportSet& set, const Terms& terms,
   root_llt_.solveInPlace(set.k_inv_a);
   set.force_hessian.noalias() = A.transpose() * set.k_inv_a;
   set.force_hessian.diagonal().array() += weights.force_regularization;
-  set.force_gradient.noalias() = -(set.k_inv_a.transpose() * c);
+  set.force_gradient.noalias() = set.k_inv_a.transpose() * c;  // −(K⁻¹A)ᵀ c: negated below
+  set.force_gradient = -set.force_gradient;
   for (Eigen::Index i = 0; i < set.points; ++i) write_pyramid(set.cones, i, set.mus[i]);
   set.cone_upper.setZero();
   if (!solve_qp(set.force_qp, workspace_allocations_, result_, set.force_hessian, set.force_gradient,
@@ -558,7 +559,8 @@ void InverseDynamics::least_squares_balance(SupportSet& set, const Vector6& wren
   const auto root_columns = set.point_jacobian.leftCols<kRootDofs>();  // Gᵀ, (3p, 6)
   set.force_hessian.noalias() = root_columns * root_columns.transpose();
   set.force_hessian.diagonal().array() += regularization;
-  set.force_gradient.noalias() = -(root_columns * wrench);
+  set.force_gradient.noalias() = root_columns * wrench;  // −G w: negated below
+  set.force_gradient = -set.force_gradient;
   for (Eigen::Index i = 0; i < set.points; ++i) write_pyramid(set.cones, i, set.mus[i]);
   set.cone_upper.setZero();
   if (!solve_qp(set.force_qp, workspace_allocations_, result_, set.force_hessian, set.force_gradient,
@@ -587,8 +589,9 @@ void InverseDynamics::place_forces(const SupportSet& set, const std::vector<bool
     }
     const Eigen::Map<const Eigen::VectorXd> contact_forces(forces.row(point_starts_[c]).data(),
                                                            3 * k);
-    result_.contact_wrench_in_world.row(c).noalias() =
-        (terms.contacts[c].point_wrench_map * contact_forces).transpose();
+    // Into the row in place (a transposed product would be evaluated into a temporary).
+    Eigen::Map<Vector6> wrench(result_.contact_wrench_in_world.row(c).data());
+    wrench.noalias() = terms.contacts[c].point_wrench_map * contact_forces;
   }
 }
 

@@ -21,9 +21,15 @@ never a crash; bad sizes are a ValueError.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import os
+import shutil
+import subprocess
+import sys
 from collections import Counter
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -463,3 +469,103 @@ def test_bad_sizes_are_a_value_error(robot):
         solver.solve(
             terms, np.zeros(model.nv), (True, True), frictions(robot), measured_wrenches=np.zeros(6)
         )
+
+
+# A repeated tick makes no heap allocation: malloc counted by a preloaded shim ---------------
+
+COUNTING_MALLOC = r"""
+#include <stddef.h>
+extern void* __libc_malloc(size_t);
+extern void* __libc_calloc(size_t, size_t);
+extern void* __libc_realloc(void*, size_t);
+extern void* __libc_memalign(size_t, size_t);
+static size_t calls;
+size_t poise_malloc_calls(void) { return __atomic_load_n(&calls, __ATOMIC_RELAXED); }
+#define COUNT() __atomic_add_fetch(&calls, 1, __ATOMIC_RELAXED)
+void* malloc(size_t n) { COUNT(); return __libc_malloc(n); }
+void* calloc(size_t n, size_t m) { COUNT(); return __libc_calloc(n, m); }
+void* realloc(void* p, size_t n) { COUNT(); return __libc_realloc(p, n); }
+void* memalign(size_t a, size_t n) { COUNT(); return __libc_memalign(a, n); }
+void* aligned_alloc(size_t a, size_t n) { COUNT(); return __libc_memalign(a, n); }
+int posix_memalign(void** p, size_t a, size_t n) {
+  COUNT();
+  *p = __libc_memalign(a, n);
+  return *p ? 0 : 12;
+}
+"""
+
+# time_solve(repeats=n) converts its inputs, runs n solves without the GIL and returns n
+# durations: 20 more solves that allocated would add at least 20 calls to malloc.
+COUNTING_SCRIPT = r"""
+import ctypes, json
+import numpy as np
+from controller_server.compiled import load_core
+from controller_server.dynamics import compute_dynamics_terms
+from controller_server.models import BUILTIN_MODELS, load_robot_model
+from tests.controller_server.states import random_states
+
+calls = ctypes.CDLL(None).poise_malloc_calls
+calls.restype = ctypes.c_size_t
+extra = {}
+for name in BUILTIN_MODELS:
+    robot = load_robot_model(name)
+    model = robot.model
+    counts = [len(c.points_in_frame) for c in robot.contacts]
+    mus = [c.friction_coefficient for c in robot.contacts]
+    solver = load_core().InverseDynamics(model.nv, counts, robot.torque_limit * 0.2)
+    rng = np.random.default_rng(5)
+    for index, (q, v) in enumerate(random_states(robot, 6, 5, (0.05,), (0.5,))):
+        terms = compute_dynamics_terms(robot, model.createData(), q, v)
+        desired = rng.normal(scale=(0.0, 10.0)[index % 2], size=model.nv)
+        for flags in ((True, True), (True, False), (False, False), "measured"):
+            wrenches = np.full((2, 6), 50.0) if flags == "measured" else None
+            request = (terms, desired, (True, True) if wrenches is not None else flags, mus)
+            path = solver.solve(*request, measured_wrenches=wrenches)["path"]
+            solver.time_solve(*request, measured_wrenches=wrenches, repeats=21)
+            before = calls()
+            solver.time_solve(*request, measured_wrenches=wrenches, repeats=21)
+            middle = calls()
+            solver.time_solve(*request, measured_wrenches=wrenches, repeats=41)
+            key = f"{name} {index} {flags} {path}"
+            extra[key] = (calls() - middle) - (middle - before)
+print(json.dumps(extra))
+"""
+
+
+def test_a_repeated_solve_calls_malloc_not_once_but_inside_proxqp(tmp_path):
+    """Counted, not assumed: with a malloc that counts its calls preloaded, 20 more solves
+    on a warm object (each support combination and path seen once) add no call on the
+    exact and measured paths. On the QP paths ProxQP itself may: its LDLᵀ update when one
+    constraint enters the active set (``ldlt_insert_rows_and_cols``) takes Eigen's GEMV
+    fallback for a one-column product, which copies that column into a heap temporary
+    (8 (dim + n_eq) bytes; once per solve on one of the 24 full-QP states here)."""
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler is None:
+        pytest.skip("no C compiler to build the counting malloc")
+    library = tmp_path / "libcounting_malloc.so"
+    source = tmp_path / "counting_malloc.c"
+    source.write_text(COUNTING_MALLOC)
+    subprocess.run(
+        [compiler, "-O2", "-shared", "-fPIC", "-o", str(library), str(source)], check=True
+    )
+    root = Path(__file__).resolve().parents[2]
+    result = subprocess.run(
+        [sys.executable, "-c", COUNTING_SCRIPT],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        env={**os.environ, "LD_PRELOAD": str(library)},
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    extra = json.loads(result.stdout)
+    paths = {key.rsplit(" ", 1)[1] for key in extra}
+    assert {"exact", "measured", "condensed_qp", "full_qp"} <= paths, paths
+    # 20 more solves: no more malloc calls, but for one that the larger array of
+    # durations may cost; on the QP paths, at most ProxQP's one per solve.
+    exact = {key: n for key, n in extra.items() if key.endswith(("exact", "measured"))}
+    assert all(-1 <= count <= 1 for count in exact.values()), exact
+    assert all(-1 <= count <= 21 for count in extra.values()), extra
+    in_proxqp = sorted(key for key, count in extra.items() if count > 1)
+    print(f"\nsolves that allocate (inside ProxQP): {in_proxqp} of {len(extra)}")
+    assert len(in_proxqp) <= 0.1 * len(extra), in_proxqp
