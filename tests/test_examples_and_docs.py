@@ -118,6 +118,7 @@ def test_hello_client_example_runs(server):
         ("estimator.py", ["--ticks", "60", "--chunks", "2"]),
         ("dynamics_core.py", ["--calls", "200", "--chunks", "2"]),
         ("joint_limits_core.py", ["--calls", "200", "--chunks", "2"]),
+        ("inverse_dynamics_core.py", ["--calls", "200", "--chunks", "2"]),
     ],
 )
 def test_benchmarks_run_and_print_ratios(script, args):

@@ -137,18 +137,14 @@ bool solve_qp(std::unique_ptr<QP>& qp, std::size_t& allocations, InverseDynamics
               Eigen::VectorXd& q, const RowMatrix& C, Eigen::VectorXd& upper,
               const Eigen::VectorXd& lower, const RowMatrix* A, Eigen::VectorXd* b,
               Eigen::Ref<Eigen::VectorXd> x) {
-  double scale = 0.0;  // max |[q; h; b]|, NaN if any is
-  const auto fold = [&scale](const Eigen::VectorXd& v) {
-    for (Eigen::Index i = 0; i < v.size(); ++i) {
-      const double magnitude = std::abs(v[i]);
-      if (!(magnitude <= scale)) scale = magnitude;  // also takes NaN, and keeps it
-      if (std::isnan(scale)) return;
-    }
-  };
-  fold(q);
-  if (!std::isnan(scale)) fold(upper);
-  if (b != nullptr && !std::isnan(scale)) fold(*b);
-  if (!std::isfinite(scale) || !P.allFinite() || !C.allFinite()) return false;
+  double scale = 0.0;  // max |[q; h; b]|
+  const Eigen::VectorXd* const linear_data[] = {&q, &upper, b};
+  for (const Eigen::VectorXd* linear : linear_data) {
+    if (linear == nullptr) continue;
+    if (!linear->allFinite()) return false;
+    scale = std::max(scale, linear->lpNorm<Eigen::Infinity>());
+  }
+  if (!P.allFinite() || !C.allFinite()) return false;
   if (A != nullptr && !A->allFinite()) return false;
   const double k = std::max(1.0, scale / kQpDataScale);
   if (k > 1.0) {
@@ -242,6 +238,25 @@ SupportSet& InverseDynamics::support_set(const std::vector<bool>& supports) {
   return *support_sets_.back();
 }
 
+// Every matrix of `terms` that a solve reads has the size of this object's nv and points
+// (terms_from_python copies whatever sizes Python had).
+void InverseDynamics::check_sizes(const Terms& terms, const char* caller) const {
+  bool ok = terms.mass_matrix.rows() == nv_ && terms.mass_matrix.cols() == nv_ &&
+            terms.bias_forces.size() == nv_ && terms.contacts.size() == point_counts_.size();
+  for (std::size_t c = 0; ok && c < terms.contacts.size(); ++c) {
+    const ContactTerms& contact = terms.contacts[c];
+    const Eigen::Index rows = 3 * point_counts_[c];
+    ok = contact.support_jacobian.rows() == 6 && contact.support_jacobian.cols() == nv_ &&
+         contact.support_drift.size() == 6 && contact.point_jacobian.rows() == rows &&
+         contact.point_jacobian.cols() == nv_ && contact.point_wrench_map.rows() == 6 &&
+         contact.point_wrench_map.cols() == rows;
+  }
+  if (!ok) {
+    throw std::invalid_argument(std::string(caller) + ": the terms' sizes differ from nv=" +
+                                std::to_string(nv_) + " and the point counts given at construction");
+  }
+}
+
 // The terms solve() reads, and q̈: finite, or status non_finite_input naming the first that is not.
 bool InverseDynamics::check_terms(const Terms& terms,
                                   const Eigen::Ref<const Eigen::VectorXd>& acceleration) {
@@ -282,11 +297,7 @@ const InverseDynamicsResult& InverseDynamics::solve(
         "InverseDynamics.solve: expected nv=" + std::to_string(nv_) + " and " +
         std::to_string(contact_count) + " contacts (terms, acceleration, supports, friction)");
   }
-  for (std::size_t c = 0; c < contact_count; ++c) {
-    if (terms.contacts[c].point_jacobian.rows() != 3 * point_counts_[c]) {
-      throw std::invalid_argument("InverseDynamics.solve: a contact's point count differs");
-    }
-  }
+  check_sizes(terms, "InverseDynamics.solve");
   result_.status = InverseDynamicsStatus::ok;
   result_.detail = "";
   result_.qp_iterations = 0;
@@ -384,6 +395,7 @@ const InverseDynamicsResult& InverseDynamics::solve_measured(
                                 std::to_string(nv_) + " and (" + std::to_string(contact_count) +
                                 ", 6) measured wrenches");
   }
+  check_sizes(terms, "InverseDynamics.solve_measured");
   result_.status = InverseDynamicsStatus::ok;
   result_.detail = "";
   result_.qp_iterations = 0;
@@ -475,7 +487,8 @@ bool InverseDynamics::condensed_motion(SupportSet& set, const Terms& terms,
   root_llt_.solveInPlace(set.k_inv_a);
   set.force_hessian.noalias() = A.transpose() * set.k_inv_a;
   set.force_hessian.diagonal().array() += weights.force_regularization;
-  set.force_gradient.noalias() = -(set.k_inv_a.transpose() * c);
+  set.force_gradient.noalias() = set.k_inv_a.transpose() * c;  // −(K⁻¹A)ᵀ c: negated below
+  set.force_gradient = -set.force_gradient;
   for (Eigen::Index i = 0; i < set.points; ++i) write_pyramid(set.cones, i, set.mus[i]);
   set.cone_upper.setZero();
   if (!solve_qp(set.force_qp, workspace_allocations_, result_, set.force_hessian, set.force_gradient,
@@ -546,7 +559,8 @@ void InverseDynamics::least_squares_balance(SupportSet& set, const Vector6& wren
   const auto root_columns = set.point_jacobian.leftCols<kRootDofs>();  // Gᵀ, (3p, 6)
   set.force_hessian.noalias() = root_columns * root_columns.transpose();
   set.force_hessian.diagonal().array() += regularization;
-  set.force_gradient.noalias() = -(root_columns * wrench);
+  set.force_gradient.noalias() = root_columns * wrench;  // −G w: negated below
+  set.force_gradient = -set.force_gradient;
   for (Eigen::Index i = 0; i < set.points; ++i) write_pyramid(set.cones, i, set.mus[i]);
   set.cone_upper.setZero();
   if (!solve_qp(set.force_qp, workspace_allocations_, result_, set.force_hessian, set.force_gradient,
@@ -575,8 +589,9 @@ void InverseDynamics::place_forces(const SupportSet& set, const std::vector<bool
     }
     const Eigen::Map<const Eigen::VectorXd> contact_forces(forces.row(point_starts_[c]).data(),
                                                            3 * k);
-    result_.contact_wrench_in_world.row(c).noalias() =
-        (terms.contacts[c].point_wrench_map * contact_forces).transpose();
+    // Into the row in place (a transposed product would be evaluated into a temporary).
+    Eigen::Map<Vector6> wrench(result_.contact_wrench_in_world.row(c).data());
+    wrench.noalias() = terms.contacts[c].point_wrench_map * contact_forces;
   }
 }
 

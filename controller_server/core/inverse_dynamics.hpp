@@ -114,6 +114,7 @@ class InverseDynamics {
 
  private:
   SupportSet& support_set(const std::vector<bool>& supports);
+  void check_sizes(const Terms& terms, const char* caller) const;
   bool check_terms(const Terms& terms, const Eigen::Ref<const Eigen::VectorXd>& acceleration);
   bool minimum_norm_balance(SupportSet& set, const Eigen::Matrix<double, 6, 1>& wrench);
   bool condensed_motion(SupportSet& set, const Terms& terms,
