@@ -56,11 +56,17 @@ __all__ = [
 ]
 
 NUM_ROOT_DOFS = 6
-QP_SETTINGS: dict[str, dict[str, int]] = {"proxqp": {"max_iter": 300, "max_iter_in": 10}}
+QP_SETTINGS: dict[str, dict[str, float]] = {
+    "proxqp": {"max_iter": 300, "max_iter_in": 10, "eps_primal_inf": 0.0, "eps_dual_inf": 0.0}
+}
 """Tighter caps than :data:`~controller_server.solvers.qp.QP_ITERATION_LIMITS` for
 these small QPs: ProxQP's converged solves took at most 35 outer iterations near standing and
 61 with velocities of 1e3 (seeded states of the built-in models), while a capped failure
-cost up to 0.2 s at the default caps."""
+cost up to 0.2 s at the default caps. And no infeasibility verdicts: every QP here is feasible
+(``f = 0`` is in the cones; any forces with clipped torques realize a motion) and strictly
+convex (``ε ‖f‖²``), hence bounded, yet ProxQP's tests (thresholds 1e-4) called some feasible
+force QPs infeasible within four iterations — on about 1 % of seeded QP states, differently in
+two builds of the same solver. The compiled core sets the same (``inverse_dynamics.cpp``)."""
 QP_DATA_SCALE = 1e6
 """QPs whose linear data (``q``, ``h``, ``b``) exceed this magnitude are solved scaled down to it
 (:func:`_solve_qp`). Near standing they stay below 2e4 (seeded states of the built-in models);

@@ -110,6 +110,11 @@ class CompiledWeightedTick:
             diagnostics=diagnostics,
         )
 
+    @property
+    def inverse_dynamics_path(self) -> str:
+        """Which branch of the inverse dynamics answered the last tick (``exact``, …)."""
+        return self._tick.inverse_dynamics_path
+
     def _sync(self, controller: MomentumController) -> Mapping[str, Any]:
         """The parameters in force, handed to the core whenever they (or the points) changed."""
         params = controller.in_force()

@@ -34,6 +34,11 @@ TOLERANCE = 1e-8
 EPSILON = float(np.finfo(float).eps)
 CONDITIONING = 10.0
 """Allowed multiple of ε κ (a backward-stable solve's forward error is a small multiple)."""
+QP_TOLERANCE = 1e-5
+"""Where the inverse dynamics solved a QP (the requested q̈ could not be realized): ProxQP's
+stopping tolerance ``eps_abs`` (1e-5), relative to the field's scale. Two solves of one QP
+from data that differ by rounding stop at points that differ by up to that much
+(``test_compiled_inverse_dynamics.py`` checks both answers' feasibility and cost)."""
 FIELDS = ("joint_acceleration", "joint_torque", "contact_force_in_world", "contact_wrench_in_world")
 
 
@@ -52,6 +57,7 @@ class Pair:
             self.welcome = reply
         self.worst = 0.0
         self.compared = 0
+        self.qp_ticks = 0
 
     @staticmethod
     def _ask(table: SessionTable, message):
@@ -67,11 +73,15 @@ class Pair:
         if not isinstance(want, Command):
             return
         assert isinstance(have, Command)
+        path = compiled_path(self.tables["compiled"])
         condition = 1.0
         if want.diagnostics is not None:
             weighted = want.diagnostics.weighted
             condition = float(weighted.schur_condition_number)
         bound = max(TOLERANCE, CONDITIONING * EPSILON * condition)
+        if path not in ("exact", "measured"):
+            bound = QP_TOLERANCE
+            self.qp_ticks += 1
         for field in FIELDS:
             expected = np.asarray(getattr(want, field), dtype=float)
             got = np.asarray(getattr(have, field), dtype=float)
@@ -80,6 +90,12 @@ class Pair:
             assert error <= bound, (field, error, bound, message.seq)
             self.worst = max(self.worst, error)
         self.compared += 1
+
+
+def compiled_path(table: SessionTable) -> str:
+    """Which branch of the inverse dynamics answered the compiled session's last tick."""
+    (session,) = table.sessions.values()
+    return session.controller._compiled_tick.inverse_dynamics_path
 
 
 @pytest.mark.parametrize("model", tuple(BUILTIN_MODELS))
@@ -105,7 +121,7 @@ def test_the_compiled_tick_agrees_with_the_python_tick(model, controller):
         pair.send(message.model_copy(update={"seq": 10_000 + step}))
     print(
         f"{model} {controller}: worst relative difference {pair.worst:.2e} "
-        f"over {pair.compared} commands"
+        f"over {pair.compared} commands ({pair.qp_ticks} with a QP)"
     )
     assert pair.compared >= 0.9 * (RANDOM_STATES + IMU_STATES)
 
