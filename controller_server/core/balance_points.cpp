@@ -17,27 +17,44 @@ bool lexicographic(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
   return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
 }
 
-// One chain of the monotone-chain hull over `ordered`, appended to `hull`
-// (`start` = hull.size() before the chain).
+// One chain of the monotone-chain hull over `ordered` (reversed: the upper chain), appended
+// to `hull`: a vertex stays on any strictly left turn, however small (support_polygon).
 void chain(const Polygon& ordered, bool reversed, Polygon& hull) {
   const std::size_t start = hull.size();
-  const double sine_squared = kCollinearSine * kCollinearSine;
   const std::size_t n = ordered.size();
   for (std::size_t k = 0; k < n; ++k) {
     const Eigen::Vector2d& b = ordered[reversed ? n - 1 - k : k];
     while (hull.size() - start >= 2) {
       const Eigen::Vector2d& o = hull[hull.size() - 2];
-      const Eigen::Vector2d& a_end = hull[hull.size() - 1];
-      const double ax = a_end.x() - o.x(), ay = a_end.y() - o.y();
-      const double ux = b.x() - o.x(), uy = b.y() - o.y();
-      const double turn = ax * uy - ay * ux;
-      // Strictly left, relative to the edge lengths: collinear up to round-off is not.
-      if (turn > 0.0 && turn * turn > sine_squared * (ax * ax + ay * ay) * (ux * ux + uy * uy)) {
-        break;
-      }
+      const Eigen::Vector2d& a = hull[hull.size() - 1];
+      if ((a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x()) > 0.0) break;
       hull.pop_back();
     }
     hull.push_back(b);
+  }
+}
+
+// balance_points._corners, in place: drop the vertices whose edges turn by less than
+// COLLINEAR_SINE and that lie between their neighbours (not where the boundary turns back).
+void corners(Polygon& vertices) {
+  bool removed = true;
+  while (removed && vertices.size() >= 3) {
+    removed = false;
+    const std::size_t n = vertices.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      const Eigen::Vector2d& p = vertices[(i + n - 1) % n];
+      const Eigen::Vector2d& c = vertices[i];
+      const Eigen::Vector2d& nx = vertices[(i + 1) % n];
+      const double bx = c.x() - p.x(), by = c.y() - p.y();
+      const double ax = nx.x() - c.x(), ay = nx.y() - c.y();
+      const bool forward = bx * ax + by * ay > 0.0;
+      if (forward &&
+          std::abs(bx * ay - by * ax) <= kCollinearSine * std::hypot(bx, by) * std::hypot(ax, ay)) {
+        vertices.erase(vertices.begin() + static_cast<std::ptrdiff_t>(i));
+        removed = true;
+        break;
+      }
+    }
   }
 }
 
@@ -105,6 +122,7 @@ void support_polygon(const Eigen::Ref<const Points>& points_in_world, PolygonScr
   hull.pop_back();
   chain(scratch, true, hull);   // upper, appended after the lower chain
   hull.pop_back();
+  corners(hull);
 }
 
 void admissible_cop_polygon(const Polygon& polygon, double margin, PolygonScratch& scratch,
