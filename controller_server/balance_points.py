@@ -121,31 +121,62 @@ def support_polygon(points_in_world: np.ndarray) -> np.ndarray:
     Andrew's monotone chain: a handful of points per tick, no Qhull call.
     Collinear points give the segment's two ends; one point gives itself;
     no points give an empty array.
+
+    The chain keeps a vertex on any strictly left turn, however small, and only then
+    are the vertices where the boundary does not turn (collinear up to
+    :data:`COLLINEAR_SINE`) dropped, each one lying between its neighbours
+    (:func:`_corners`). The chain's own order along a line is the lexicographic
+    one, which along an edge parallel to y is set by the round-off of x: the heels
+    of two feet side by side (four points on one line, their x equal up to 1e-17) come in
+    any order there. Dropped during the chain, a point collinear with the last two was
+    the middle one only if they came in order along the line; out of order, a
+    heel's outer corner went, and the hull lost a triangle of a foot (24 × 11 cm on
+    the revolute humanoid), so the COP allowed to ``com`` jumped between ticks with
+    the rounding of the kinematics.
     """
     xy = np.asarray(points_in_world, dtype=float).reshape(-1, 3)[:, :2]
     points = sorted(set(map(tuple, xy.tolist())))
     if len(points) <= 2:
         return np.array(points).reshape(-1, 2)
-    sine_squared = COLLINEAR_SINE * COLLINEAR_SINE
 
     def chain(ordered: list[tuple[float, float]]) -> list[tuple[float, float]]:
         hull: list[tuple[float, float]] = []
         for bx, by in ordered:
             while len(hull) >= 2:
                 (ox, oy), (ax, ay) = hull[-2], hull[-1]
-                ax, ay, ux, uy = ax - ox, ay - oy, bx - ox, by - oy
-                turn = ax * uy - ay * ux
-                # Strictly left, relative to the edge lengths: collinear up to round-off is not.
-                if turn > 0.0 and turn * turn > sine_squared * (ax * ax + ay * ay) * (
-                    ux * ux + uy * uy
-                ):
+                if (ax - ox) * (by - oy) - (ay - oy) * (bx - ox) > 0.0:  # strictly left
                     break
                 hull.pop()
             hull.append((bx, by))
         return hull
 
     lower, upper = chain(points), chain(points[::-1])
-    return np.array(lower[:-1] + upper[:-1])
+    return np.array(_corners(lower[:-1] + upper[:-1])).reshape(-1, 2)
+
+
+def _corners(vertices: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """A convex polygon's vertices without those on the segment between their neighbours.
+
+    A vertex goes when its edges turn by less than :data:`COLLINEAR_SINE` (sine of the
+    angle) and it lies between its neighbours: what it adds to the polygon is a sliver
+    of that relative width. A vertex where the boundary turns back (the ends of a
+    polygon of collinear points) stays, so collinear points give the segment's ends.
+    """
+    removed = True
+    while removed and len(vertices) >= 3:
+        removed = False
+        for i, (x, y) in enumerate(vertices):
+            px, py = vertices[i - 1]
+            nx, ny = vertices[(i + 1) % len(vertices)]
+            bx, by, ax, ay = x - px, y - py, nx - x, ny - y
+            forward = bx * ax + by * ay > 0.0
+            if forward and abs(bx * ay - by * ax) <= COLLINEAR_SINE * math.hypot(
+                bx, by
+            ) * math.hypot(ax, ay):
+                del vertices[i]
+                removed = True
+                break
+    return vertices
 
 
 def shrink_polygon(polygon_xy: np.ndarray, margin: float) -> np.ndarray:

@@ -107,6 +107,67 @@ def test_turned_feet_side_by_side_shrink_to_a_finite_polygon_inside_the_feet():
             assert distance_to_boundary(vertex, polygon) == pytest.approx(0.02, abs=1e-9)
 
 
+HEELS_AND_TOES_UP_TO_ROUNDING = np.array(
+    [
+        [-0.06999706209641562, 0.045000000000000075],
+        [-0.0699970620964156, -0.15500000000000003],
+        [-0.0699970620964156, -0.04500000000000002],
+        [-0.0699970620964156, 0.15500000000000008],
+        [0.1700029216864892, 0.04499999999999999],
+        [0.17000292168648923, -0.15500000000000003],
+        [0.17000292168648923, -0.04500000000000002],
+        [0.17000292168648923, 0.155],
+    ]
+)
+"""The sole corners of the revolute humanoid standing (its kinematics at 26 ms of the walk):
+heels and toes on lines parallel to y, their x equal up to 2e-17."""
+
+
+def polygon_area(polygon: np.ndarray) -> float:
+    x, y = polygon[:, 0], polygon[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def test_the_hull_keeps_every_corner_when_heels_are_collinear_up_to_rounding():
+    """Sorted by x, the heels come in the order their rounding gives, not along the heel line:
+    a chain that dropped nearly collinear points as it went lost the outer corner of a heel
+    (a triangle of 24 × 11 cm), on half the ticks of a standing robot."""
+    polygon = support_polygon(np.column_stack([HEELS_AND_TOES_UP_TO_ROUNDING, np.zeros(8)]))
+    assert len(polygon) == 4, polygon
+    np.testing.assert_allclose(polygon_area(polygon), 0.24 * 0.31, rtol=1e-6)
+    for point in HEELS_AND_TOES_UP_TO_ROUNDING:
+        assert inside(point, polygon, 1e-15), point
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.integers(-4, 4), min_size=16, max_size=16),
+    st.floats(0.0, 2.0 * np.pi),
+    st.permutations(range(8)),
+)
+def test_the_hull_of_two_feet_holds_them_whatever_their_rounding(ulps, yaw, order):
+    """Two soles side by side, turned by any yaw, every coordinate a few ulps off: the hull
+    holds every point and has the two soles' outline (area) and four corners."""
+    foot = np.array([[0.17, 0.045], [0.17, 0.155], [-0.07, 0.045], [-0.07, 0.155]])
+    points = np.vstack([foot, foot * [1.0, -1.0]])
+    rotation = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+    points = points @ rotation.T
+    points += np.spacing(np.abs(points) + 1e-300) * np.reshape(ulps, (8, 2))
+    points = points[list(order)]
+    polygon = support_polygon(np.column_stack([points, np.zeros(8)]))
+    assert len(polygon) == 4, polygon
+    np.testing.assert_allclose(polygon_area(polygon), 0.24 * 0.31, rtol=1e-9)
+    for point in points:
+        assert inside(point, polygon, 1e-12), point
+
+
+def test_collinear_points_in_any_order_give_the_segments_ends():
+    line = np.array([[0.0, 0.1], [1e-17, -0.2], [0.0, 0.3], [-1e-17, 0.0]])
+    polygon = support_polygon(np.column_stack([line, np.zeros(4)]))
+    assert len(polygon) == 2, polygon
+    assert sorted(polygon[:, 1].tolist()) == [-0.2, 0.3]
+
+
 def test_degenerate_polygons_collapse_to_a_point():
     np.testing.assert_allclose(shrink_polygon(np.array([[0.1, 0.2]]), 0.0), [[0.1, 0.2]])
     segment = np.array([[0.0, 0.0], [0.2, 0.0]])
