@@ -1,4 +1,5 @@
 // _core.WeightedTick: the weighted controllers' tick (weighted_tick.hpp) for Python.
+#include <chrono>
 #include <string>
 #include <vector>
 
@@ -180,6 +181,33 @@ nb::dict compute(WeightedTick& tick, VectorRef q, VectorRef v, const std::vector
   return out;
 }
 
+// `repeats` whole ticks at one state in C++ (no Python between them, no outputs copied):
+// per-tick seconds, for the benchmarks and the allocation count of the tests.
+std::vector<double> time_compute(WeightedTick& tick, VectorRef q, VectorRef v,
+                                 const std::vector<bool>& supports, int repeats) {
+  const Model& model = tick.model();
+  if (q.size() != model.nq || v.size() != model.nv || repeats < 0) {
+    throw std::invalid_argument("q or v has the wrong size, or repeats < 0");
+  }
+  if (supports.size() != tick.terms().contacts.size()) {
+    throw std::invalid_argument("one support flag per contact is needed");
+  }
+  std::vector<double> seconds(static_cast<std::size_t>(repeats));
+  const RowMatrix none(0, 6);
+  const Eigen::VectorXd empty(0);
+  {
+    nb::gil_scoped_release release;
+    for (double& duration : seconds) {
+      const auto start = std::chrono::steady_clock::now();
+      const std::string failure =
+          tick.compute(q, v, supports, none, empty, empty, empty, false, false);
+      duration = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (!failure.empty()) break;
+    }
+  }
+  return seconds;
+}
+
 // What a behaviour observes of the prepared state (behaviors.Observation's fields).
 nb::dict observation(const WeightedTick& tick) {
   const Terms& terms = tick.terms();
@@ -246,6 +274,8 @@ void bind_weighted(nb::module_& m) {
       .def("prepare", &WeightedTick::prepare, "q"_a, "v"_a,
            nb::call_guard<nb::gil_scoped_release>(),
            "The dynamics terms at (q, v), for a behaviour to observe before compute(prepared=True).")
+      .def("time_compute", &time_compute, "q"_a, "v"_a, "supports"_a, "repeats"_a,
+           "Per-tick seconds of `repeats` ticks at one state, in C++ alone (the benchmarks).")
       .def("observation", &observation, "What a behaviour reads of the prepared state.")
       .def("compute", &compute, "q"_a, "v"_a, "supports"_a, "measured_wrenches"_a.none(),
            "q_ref"_a.none(), "v_ref"_a.none(), "a_ref"_a.none(),

@@ -57,15 +57,17 @@ bool WeightedKKT::solve(const Eigen::Ref<const Eigen::MatrixXd>& hessian,
                         const Eigen::Ref<const Eigen::VectorXd>& gradient,
                         const Eigen::Ref<const Eigen::MatrixXd>& C,
                         const Eigen::Ref<const Eigen::VectorXd>& d, double objective_gain_bound,
-                        double constraint_gain_bound, bool conditioning,
-                        Eigen::Ref<Eigen::VectorXd> x, KKTResult& result) {
+                        double constraint_gain_bound, Eigen::Ref<Eigen::VectorXd> x,
+                        KKTResult& result) {
   result = KKTResult{};
+  schur_factored_ = false;
   if (!objective_.compute(hessian, objective_gain_bound)) {
     x.setZero();
     result.objective_damping = kNaN;
     result.constraint_residual = kInf;
     result.objective_condition_number = kInf;
     result.schur_condition_number = kInf;
+    result.conditioning_estimated = true;
     return false;
   }
   x_free_ = gradient;
@@ -83,16 +85,7 @@ bool WeightedKKT::solve(const Eigen::Ref<const Eigen::MatrixXd>& hessian,
       multipliers_ = rhs_;
       schur_factor_.solve_in_place(multipliers_);
       result.constraint_damping = schur_factor_.damping();
-      if (conditioning) {
-        if (result.constraint_damping > 0) {  // the undamped Schur complement's conditioning
-          eigen_.compute(schur_, Eigen::EigenvaluesOnly);
-          const Eigen::VectorXd& values = eigen_.eigenvalues();
-          result.schur_condition_number =
-              values(0) > 0 ? values(values.size() - 1) / values(0) : kInf;
-        } else {
-          result.schur_condition_number = schur_factor_.damped_condition();
-        }
-      }
+      schur_factored_ = true;
     } else {  // damped_solve_psd: by eigenvalues
       eigen_.compute(0.5 * (schur_ + schur_.transpose()));
       Eigen::VectorXd values = eigen_.eigenvalues().cwiseMax(0.0);
@@ -125,8 +118,21 @@ bool WeightedKKT::solve(const Eigen::Ref<const Eigen::MatrixXd>& hessian,
       result.constraint_residual = 0.0;
     }
   }
-  if (conditioning) result.objective_condition_number = objective_.damped_condition();
   return result.found;
+}
+
+void WeightedKKT::estimate_conditioning(KKTResult& result) const {
+  if (result.conditioning_estimated) return;
+  result.conditioning_estimated = true;
+  result.objective_condition_number = objective_.damped_condition();
+  if (!schur_factored_) return;  // no constraint (1), or by eigenvalues in solve()
+  if (result.constraint_damping > 0) {  // the undamped Schur complement's conditioning
+    eigen_.compute(schur_, Eigen::EigenvaluesOnly);
+    const Eigen::VectorXd& values = eigen_.eigenvalues();
+    result.schur_condition_number = values(0) > 0 ? values(values.size() - 1) / values(0) : kInf;
+  } else {
+    result.schur_condition_number = schur_factor_.damped_condition();
+  }
 }
 
 }  // namespace poise

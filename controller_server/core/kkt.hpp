@@ -49,27 +49,34 @@ struct KKTResult {
   double objective_damping = 0.0;
   double constraint_damping = 0.0;
   double constraint_residual = 0.0;
-  // Condition numbers (diagnostics): of the damped M, and of C M⁻¹ Cᵀ before damping.
+  // Condition numbers (diagnostics, by WeightedKKT::estimate_conditioning): of the damped
+  // M, and of C M⁻¹ Cᵀ before damping.
   double objective_condition_number = 0.0;
   double schur_condition_number = 1.0;
+  bool conditioning_estimated = false;
 };
 
 // solve_weighted_kkt on the normal equations (M, u) and the equality (C, d).
 class WeightedKKT {
  public:
-  // x (size n) is written; false (x = 0) if no finite solution. Condition numbers are
-  // estimated only when `conditioning` is set (they cost as much as the factor).
+  // x (size n) is written; false (x = 0) if no finite solution. The condition numbers are
+  // left for estimate_conditioning (diagnostics only: they cost as much as a factor).
   bool solve(const Eigen::Ref<const Eigen::MatrixXd>& hessian,
              const Eigen::Ref<const Eigen::VectorXd>& gradient,
              const Eigen::Ref<const Eigen::MatrixXd>& C, const Eigen::Ref<const Eigen::VectorXd>& d,
-             double objective_gain_bound, double constraint_gain_bound, bool conditioning,
+             double objective_gain_bound, double constraint_gain_bound,
              Eigen::Ref<Eigen::VectorXd> x, KKTResult& result);
 
+  // The condition numbers of the last solve into `result` (KKTSolution's properties,
+  // estimated on demand as there): of the damped M, and of C M⁻¹ Cᵀ before damping.
+  void estimate_conditioning(KKTResult& result) const;
+
  private:
+  bool schur_factored_ = false;  // the last solve factored C M⁻¹ Cᵀ (else: none, or eigen)
   DampedCholesky objective_, schur_factor_;
   Eigen::MatrixXd M_inv_CT_, schur_;
   Eigen::VectorXd x_free_, rhs_, multipliers_;
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen_;
+  mutable Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen_;
 };
 
 }  // namespace poise

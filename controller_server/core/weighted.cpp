@@ -230,8 +230,7 @@ bool WeightedOptimizer::optimize(
     rows += 6;
   }
   return kkt_.solve(hessian_, gradient_, C_.topRows(rows), d_.head(rows),
-                    params.objective_gain_bound, params.constraint_gain_bound, true, x,
-                    report_.kkt);
+                    params.objective_gain_bound, params.constraint_gain_bound, x, report_.kkt);
 }
 
 void WeightedOptimizer::residuals(const Eigen::Ref<const Eigen::VectorXd>& x,

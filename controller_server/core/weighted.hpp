@@ -98,6 +98,11 @@ class WeightedOptimizer {
   void support_polygon(const Terms& terms, const std::vector<bool>& supports, Polygon& hull);
 
   const OptimizerReport& report() const { return report_; }
+  // The report with the KKT's condition numbers estimated (diagnostics only).
+  const OptimizerReport& report_with_conditioning() {
+    kkt_.estimate_conditioning(report_.kkt);
+    return report_;
+  }
   // ‖√w (A x − b)‖ of each task at the last optimizer run, in stack order (names: tracking,
   // linear_momentum, angular_momentum, point:<name>), for the tasks that had rows.
   void residuals(const Eigen::Ref<const Eigen::VectorXd>& x,

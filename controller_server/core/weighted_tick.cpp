@@ -156,6 +156,7 @@ void WeightedTick::fill_diagnostics(const std::vector<bool>& supports) {
   diagnostics_.angular_momentum_rate += terms_.s_bias;
   optimizer_.support_polygon(terms_, supports, diagnostics_.support_polygon);
   optimizer_.residuals(acceleration, diagnostics_.objective_residuals);
+  optimizer_.report_with_conditioning();
 }
 
 }  // namespace poise
