@@ -14,6 +14,7 @@ import pinocchio as pin
 import pytest
 
 from controller_server.behaviors import BEHAVIORS
+from controller_server.behaviors.observation import Observation
 from controller_server.controllers import CONTROLLERS, ControlInput, create_controller
 from controller_server.errors import InvalidParams
 from controller_server.models import load_robot_model
@@ -121,3 +122,32 @@ def test_no_controller_names_a_behaviour_in_its_code():
             if any(word in name.lower() for word in ("walk", "jump", "knee", "shoulder"))
         }
         assert not named, (path.name, named)
+
+
+def test_the_walk_learns_its_speed_correction_from_steps_that_land_on_time_only(robot):
+    """A stumble's early or late touch-down measures the disturbance, not the model's bias:
+    the footholds correct it in the next step, and learning it too counted it twice."""
+    walk = BEHAVIORS["walk"](robot)
+    walk._speed = 0.5  # the planned speed, reached
+    params = {"walk_speed": 0.5, "walk_speed_gain": 0.5}
+    contacts = len(robot.contacts)
+
+    def touch_down(time_s: float, com_x: float, on_time: bool) -> float:
+        observation = Observation(
+            time_s,
+            np.array([com_x, 0.0, 0.9]),
+            np.zeros(3),
+            (True,) * contacts,
+            np.zeros((contacts, 3)),
+            np.tile(np.eye(3), (contacts, 1, 1)),
+            robot.standing_joint_position,
+            np.array([0.0, 0.0, 0.0, 1.0]),
+            0.0,
+        )
+        walk._learn_speed(observation, params, on_time)
+        return walk._speed_correction
+
+    assert touch_down(1.0, 0.0, on_time=True) == 0.0  # the first: nothing to compare with
+    assert touch_down(1.4, 0.3, on_time=False) == 0.0  # a stumble at 0.75 m/s: not learned
+    # On time again, at 0.2 m / 0.5 s = 0.4 m/s: the correction grows by 0.5 × 0.1 / 0.5.
+    assert touch_down(1.9, 0.5, on_time=True) == pytest.approx(0.1)
