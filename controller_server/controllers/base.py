@@ -139,16 +139,16 @@ CONTACT_PARAMETERS: dict[str, ParamSpec] = {
 
 KERNEL_PARAMETERS: dict[str, ParamSpec] = {
     "kernel": ParamSpec(
-        "python",
+        "compiled",
         kind="choice",
         choices=KERNELS,
-        doc="dynamics terms (M, h, Jacobians, drifts, momentum) by the compiled core or by "
-        "the Python specification (controller_server.dynamics): equal to rounding, the "
-        "compiled about 3× faster (bench/dynamics_core.py); python stays the default until "
-        "two simulated runs that rounding changes are settled (CHANGELOG)",
+        doc="the compiled core or the Python specification: the weighted controllers' whole "
+        "tick (dynamics, optimizer, inverse dynamics; controllers/compiled_tick.py), the "
+        "prioritized controller's dynamics terms, the IMU path's estimator; equal to rounding "
+        "(tests/controller_server/test_compiled_*.py)",
     ),
 }
-"""How every controller computes its dynamics terms."""
+"""Which implementation runs a controller's tick: the compiled core or the Python."""
 
 
 @dataclass(frozen=True)

@@ -213,7 +213,15 @@ PRIORITIZED_PARAMETERS: dict[str, ParamSpec] = {
         1.0, minimum=0.0, maximum=100.0, doc="ζ of every setpoint: k_v = 2 ζ √k_p (eq. 4)"
     ),
     **CONTACT_PARAMETERS,
-    **KERNEL_PARAMETERS,
+    "kernel": ParamSpec(
+        "python",
+        kind="choice",
+        choices=KERNEL_PARAMETERS["kernel"].choices,
+        doc="the compiled core (here: the dynamics terms and the IMU path's estimator; the "
+        "rest of the tick is issue 36's) or the Python specification; python by default "
+        "until the tick is compiled: the revolute humanoid's MuJoCo walk from the exact "
+        "crouch stumbles with the compiled terms (CHANGELOG, known limitations)",
+    ),
     "non_penetration": ParamSpec(
         True, kind="bool", doc="enforce eq. 26 at the points carrying force"
     ),
