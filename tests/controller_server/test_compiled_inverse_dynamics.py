@@ -274,6 +274,7 @@ def test_the_compiled_inverse_dynamics_matches_the_python_on_1080_states(robot, 
             if got["path"] != python_path:
                 mismatched.append((case.name, got["path"], python_path))
                 continue
+            assert got["qp_failures"] == python_failures, (case.name, got, python_failures)
             differences = relative_differences(got, want)
             if got["path"] in ("exact", "measured"):
                 for field, difference in differences.items():
