@@ -5,8 +5,9 @@ For each built-in model, on two states: standing at rest on both feet with ``q̈
 ``q̈`` pushes the centre of pressure off the feet (a QP case). Timed on the same terms
 (``compute_dynamics_terms``), in alternating chunks so that all see the same load:
 
-* ``python daqp``: ``solve_inverse_dynamics`` as the controllers call it (DAQP);
-* ``python proxqp``: the same with ``qp_solver="proxqp"``, the compiled core's solver;
+* ``python daqp``: ``solve_inverse_dynamics`` with ``qp_solver="daqp"`` (kernel "python" only);
+* ``python quadprog``: the same with ``qp_solver="quadprog"``, the controllers' default and the
+  compiled core's method (Goldfarb–Idnani; eiquadprog in C++);
 * ``compiled``: ``_core.InverseDynamics.solve`` from Python: the DynamicsTerms copied into
   C++ (about 30 µs, which the compiled tick, holding its terms in C++, does not spend),
   fresh arrays out;
@@ -72,7 +73,7 @@ def main() -> None:
     args = parser.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; {args.calls} calls")
     print(
-        f"{'model':<19}{'nv':>4}  {'state':<10}{'variant':<15}{'p50 µs':>9}{'p99 µs':>9}"
+        f"{'model':<19}{'nv':>4}  {'state':<10}{'variant':<17}{'p50 µs':>9}{'p99 µs':>9}"
         f"{'python/it':>11}"
     )
     for name in BUILTIN_MODELS:
@@ -84,7 +85,7 @@ def main() -> None:
             for label, samples in times.items():
                 p50, p99 = np.percentile(samples, [50, 99])
                 print(
-                    f"{name:<19}{robot.model.nv:>4}  {state:<10}{label:<15}{p50 * 1e6:>9.1f}"
+                    f"{name:<19}{robot.model.nv:>4}  {state:<10}{label:<17}{p50 * 1e6:>9.1f}"
                     f"{p99 * 1e6:>9.1f}{python50 / p50:>10.2f}x"
                 )
 
@@ -97,8 +98,8 @@ def measure(
     limit = robot.torque_limit
     request = (terms, desired, BOTH_FEET, mus)
     variants = {
-        "python daqp": lambda _: solve_inverse_dynamics(*request, limit),
-        "python proxqp": lambda _: solve_inverse_dynamics(*request, limit, qp_solver="proxqp"),
+        "python daqp": lambda _: solve_inverse_dynamics(*request, limit, qp_solver="daqp"),
+        "python quadprog": lambda _: solve_inverse_dynamics(*request, limit, qp_solver="quadprog"),
         "compiled": lambda _: solver.solve(*request),
     }
     for step in variants.values():

@@ -66,7 +66,8 @@ cost up to 0.2 s at the default caps. And no infeasibility verdicts: every QP he
 (``f = 0`` is in the cones; any forces with clipped torques realize a motion) and strictly
 convex (``ε ‖f‖²``), hence bounded, yet ProxQP's tests (thresholds 1e-4) called some feasible
 force QPs infeasible within four iterations — on about 1 % of seeded QP states, differently in
-two builds of the same solver. The compiled core sets the same (``inverse_dynamics.cpp``)."""
+two builds of the same solver. The controllers' default, quadprog (Goldfarb–Idnani's dual
+active-set method, as the compiled core's eiquadprog), has no settings and needs no caps."""
 QP_DATA_SCALE = 1e6
 """QPs whose linear data (``q``, ``h``, ``b``) exceed this magnitude are solved scaled down to it
 (:func:`_solve_qp`). Near standing they stay below 2e4 (seeded states of the built-in models);
@@ -134,7 +135,7 @@ def solve_inverse_dynamics(
     measured_wrenches: np.ndarray | None = None,
     force_regularization: float = 1e-4,
     support_weight: float = 100.0,
-    qp_solver: str = "daqp",
+    qp_solver: str = "quadprog",
 ) -> InverseDynamicsResult:
     """Torques and contact forces realizing ``acceleration`` (eq. 4.2), or the nearest they can.
 
@@ -149,7 +150,8 @@ def solve_inverse_dynamics(
         force_regularization: ``ε`` on ``‖f‖²`` when ``q̈`` cannot be realized.
         support_weight: ``w_s`` per kg of robot mass on the supports' acceleration
             when ``q̈`` cannot be realized (see :func:`nearest_feasible_motion`).
-        qp_solver: Any solver name ``qpsolvers`` knows.
+        qp_solver: Any solver name ``qpsolvers`` knows; ``"quadprog"`` (Goldfarb–Idnani's
+            dual active-set method: feasible to rounding) is what the compiled core runs.
     """
     M, h = terms.mass_matrix, terms.bias_forces
     counts = [J.shape[0] // 3 for J in terms.point_jacobians]

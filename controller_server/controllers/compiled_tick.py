@@ -5,7 +5,7 @@
 dynamics terms, the optimizer of Macchietto 2008, eq. 5.1 (the tasks ``tracking``,
 ``linear_momentum``, ``angular_momentum`` and the point targets, the KKT of App. D with
 damped least squares) every N-th tick or when the supports change, and the inverse dynamics
-of eq. 4.2 with its contact-force QP (ProxQP) — with the GIL released and no allocation
+of eq. 4.2 with its contact-force QP (eiquadprog) — with the GIL released and no allocation
 after the first ticks. The Python tick stays the specification (``kernel = "python"``);
 tests hold the two together.
 

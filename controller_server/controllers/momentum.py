@@ -206,11 +206,12 @@ class MomentumController(Controller):
             doc="w_s per kg on the supports' acceleration when q̈ cannot be realized (1)",
         ),
         "qp_solver": ParamSpec(
-            "proxqp",
+            "quadprog",
             kind="choice",
-            choices=("proxqp", "daqp", "quadprog"),
-            doc="QP solver for contact forces: the compiled kernel has ProxQP (its C++ API); "
-            "daqp and quadprog (via qpsolvers) need kernel 'python'",
+            choices=("quadprog", "daqp", "proxqp"),
+            doc="QP solver for contact forces: quadprog (Goldfarb–Idnani's dual active-set "
+            "method, exact feasibility; the compiled kernel runs the same method by eiquadprog); "
+            "daqp and proxqp (via qpsolvers) need kernel 'python'",
         ),
     }
 
@@ -274,12 +275,12 @@ class MomentumController(Controller):
                 self.tasks.add(PointTask(name, target), target.weight)
 
     def _check_together(self, params: Mapping[str, Any]) -> None:
-        """The compiled kernel solves its contact-force QPs with ProxQP only."""
-        if params["kernel"] == "compiled" and params["qp_solver"] != "proxqp":
+        """The compiled kernel solves its contact-force QPs by Goldfarb–Idnani only."""
+        if params["kernel"] == "compiled" and params["qp_solver"] != "quadprog":
             raise InvalidParams(
                 "params.qp_solver",
                 f"{params['qp_solver']!r} needs kernel 'python'; the compiled kernel solves its "
-                "QPs with 'proxqp'",
+                "QPs with 'quadprog' (Goldfarb–Idnani, by eiquadprog)",
             )
 
     def _validate(self, key: str, value: Any) -> Any:

@@ -151,7 +151,8 @@ void bind_inverse_dynamics(nb::module_& m) {
   nb::class_<InverseDynamics>(
       m, "InverseDynamics",
       "inverse_dynamics.solve_inverse_dynamics in C++: one session's sizes, torque limits and "
-      "workspaces (ProxQP for the QP cases, with the Python ProxQP path's settings).")
+      "workspaces (eiquadprog, Goldfarb–Idnani, for the QP cases: the Python path's quadprog "
+      "method).")
       .def(nb::init<Eigen::Index, std::vector<Eigen::Index>, Eigen::VectorXd>(), "nv"_a,
            "point_counts"_a, "torque_limit"_a,
            "nv DoFs (a free-flyer root first), each contact's number of sole points, and the "
@@ -159,9 +160,9 @@ void bind_inverse_dynamics(nb::module_& m) {
       .def("solve", &solve, "terms"_a, "acceleration"_a, "supports"_a,
            "friction_coefficients"_a, "measured_wrenches"_a = nb::none(),
            "force_regularization"_a = 1e-4, "support_weight"_a = 100.0,
-           "solve_inverse_dynamics(terms, ...) with qp_solver='proxqp': a dict of new arrays "
+           "solve_inverse_dynamics(terms, ...) with qp_solver='quadprog': a dict of new arrays "
            "(InverseDynamicsResult's field names), `path` (measured, exact, condensed_qp, "
-           "full_qp or least_squares), `qp_iterations` (ProxQP's outer iterations, summed) and "
+           "full_qp or least_squares), `qp_iterations` (active-set iterations, summed) and "
            "`qp_failures` (its solves without an answer). ValueError on non-finite inputs.")
       .def("time_solve", &time_solve, "terms"_a, "acceleration"_a, "supports"_a,
            "friction_coefficients"_a, "measured_wrenches"_a = nb::none(),
@@ -171,7 +172,7 @@ void bind_inverse_dynamics(nb::module_& m) {
       .def_prop_ro("support_set_count", &InverseDynamics::support_set_count,
                    "Support-flag combinations seen (each holds its own workspace).")
       .def_prop_ro("qp_cache_size", &InverseDynamics::qp_cache_size,
-                   "ProxQP objects held (at most two per support combination).")
+                   "QP solvers held (at most two per support combination).")
       .def_prop_ro("workspace_allocations", &InverseDynamics::workspace_allocations,
                    "Heap allocations of workspaces since construction (support sets, QPs).");
 }

@@ -10,7 +10,7 @@
 #include <string>
 #include <utility>
 
-#include <proxsuite/proxqp/dense/dense.hpp>
+#include <eiquadprog/eiquadprog-fast.hpp>
 
 namespace poise {
 
@@ -19,29 +19,36 @@ namespace {
 constexpr Eigen::Index kRootDofs = 6;  // NUM_ROOT_DOFS: the free flyer's unactuated rows
 // QP_DATA_SCALE: linear QP data larger than this are solved scaled down to it (_solve_qp).
 constexpr double kQpDataScale = 1e6;
-// QP_SETTINGS["proxqp"] of inverse_dynamics.py, within QP_ITERATION_LIMITS["proxqp"] of
-// solvers/qp.py (1000, 20): the lower caps win. Every other setting is ProxQP's default,
-// as in the Python path (solve_qp_bounded's dense QP, PrimalDualLDLT).
-constexpr long kQpMaxIter = 300;
-constexpr long kQpMaxIterIn = 10;
 // Torque differences below this are solver tolerance, not saturation (_realize).
 constexpr double kSaturationTolerance = 1e-6;
 
-using QP = proxsuite::proxqp::dense::QP<double>;
 using Vector6 = Eigen::Matrix<double, 6, 1>;
 using RootRows = Eigen::Matrix<double, 6, Eigen::Dynamic>;
+using eiquadprog::solvers::EiquadprogFast;
 
-std::unique_ptr<QP> make_qp(Eigen::Index dim, Eigen::Index n_eq, Eigen::Index n_in) {
-  auto qp = std::make_unique<QP>(dim, n_eq, n_in, false, proxsuite::proxqp::HessianType::Dense,
-                                 proxsuite::proxqp::DenseBackend::PrimalDualLDLT);
-  qp->settings.max_iter = kQpMaxIter;
-  qp->settings.max_iter_in = kQpMaxIterIn;
-  // No infeasibility verdicts (QP_SETTINGS): every QP here is feasible and strictly convex,
-  // yet ProxQP's tests called some feasible force QPs infeasible within four iterations.
-  qp->settings.eps_primal_inf = 0.0;
-  qp->settings.eps_dual_inf = 0.0;
-  return qp;
-}
+}  // namespace
+
+// One QP of fixed sizes, by eiquadprog's Goldfarb–Idnani dual active-set method (Python:
+// quadprog through qpsolvers, the same method): the solver, sized once by reset(), and its
+// data in the column-major layout and sign convention it reads,
+//   min ½ xᵀ H x + gᵀ x  s.t.  CE x + ce0 = 0,  CI x + ci0 ≥ 0
+// (ours: G x ≤ h is CI = −G, ci0 = h; A x = b is CE = A, ce0 = −b).
+struct QpWorkspace {
+  EiquadprogFast solver;
+  Eigen::MatrixXd hessian, ce, ci;
+  Eigen::VectorXd gradient, ce0, ci0, x;
+
+  QpWorkspace(Eigen::Index n, Eigen::Index n_eq, Eigen::Index n_in)
+      : hessian(Eigen::MatrixXd::Zero(n, n)), ce(Eigen::MatrixXd::Zero(n_eq, n)),
+        ci(Eigen::MatrixXd::Zero(n_in, n)), gradient(Eigen::VectorXd::Zero(n)),
+        ce0(Eigen::VectorXd::Zero(n_eq)), ci0(Eigen::VectorXd::Zero(n_in)),
+        x(Eigen::VectorXd::Zero(n)) {
+    solver.reset(static_cast<std::size_t>(n), static_cast<std::size_t>(n_eq),
+                 static_cast<std::size_t>(n_in));
+  }
+};
+
+namespace {
 
 // friction_pyramid's rows for one point, written into `cones` at (5i, 3i): ±f_x − μ' f_z ≤ 0,
 // ±f_y − μ' f_z ≤ 0, −f_z ≤ 0 with μ' = μ/√2 (the pyramid inscribed in Coulomb's cone).
@@ -66,7 +73,7 @@ const char* path_name(InverseDynamicsPath path) {
 }
 
 // One combination of support flags: the supporting contacts' rows, and the workspaces
-// and ProxQP objects of the QPs over their p points (created on the first QP).
+// and QP solvers of the QPs over their p points (created on the first QP).
 struct SupportSet {
   std::vector<bool> supports;
   Eigen::Index contacts = 0;  // s supporting contacts
@@ -85,18 +92,18 @@ struct SupportSet {
   RowMatrix force_hessian;                  // (3p, 3p)
   Eigen::VectorXd force_gradient;           // (3p,)
   RowMatrix cones;                          // (5p, 3p): friction_pyramid
-  Eigen::VectorXd cone_upper, cone_lower;   // 0, −∞
-  std::unique_ptr<QP> force_qp;             // _condensed_motion's and _least_squares_balance's
+  Eigen::VectorXd cone_upper;               // 0
+  std::unique_ptr<QpWorkspace> force_qp;    // _condensed_motion's and _least_squares_balance's
 
   // The full QP of nearest_feasible_motion (nv + 3p unknowns, 6 equalities).
   RowMatrix full_hessian;        // (nv + 3p, nv + 3p)
   Eigen::VectorXd full_gradient;
   RowMatrix full_inequality;     // (5p + 2(nv − 6), nv + 3p)
-  Eigen::VectorXd full_upper, full_lower;
+  Eigen::VectorXd full_upper;
   RowMatrix full_equality;       // (6, nv + 3p): the root rows of [M, −J_cᵀ]
   Eigen::VectorXd full_equality_rhs;  // −h_root
   Eigen::VectorXd full_solution;      // [q̈; f]
-  std::unique_ptr<QP> full_qp;
+  std::unique_ptr<QpWorkspace> full_qp;
 
   SupportSet(std::vector<bool> flags, Eigen::Index nv, const std::vector<Eigen::Index>& counts)
       : supports(std::move(flags)) {
@@ -118,12 +125,10 @@ struct SupportSet {
     force_gradient = Eigen::VectorXd::Zero(3 * p);
     cones = RowMatrix::Zero(5 * p, 3 * p);
     cone_upper = Eigen::VectorXd::Zero(5 * p);
-    cone_lower = Eigen::VectorXd::Constant(5 * p, -std::numeric_limits<double>::infinity());
     full_hessian = RowMatrix::Zero(n, n);
     full_gradient = Eigen::VectorXd::Zero(n);
     full_inequality = RowMatrix::Zero(n_in, n);
     full_upper = Eigen::VectorXd::Zero(n_in);
-    full_lower = Eigen::VectorXd::Constant(n_in, -std::numeric_limits<double>::infinity());
     full_equality = RowMatrix::Zero(kRootDofs, n);
     full_equality_rhs = Eigen::VectorXd::Zero(kRootDofs);
     full_solution = Eigen::VectorXd::Zero(n);
@@ -132,53 +137,55 @@ struct SupportSet {
 
 namespace {
 
-// _solve_qp: min ½ xᵀ P x + qᵀ x s.t. G x ≤ h (ProxQP: −∞ ≤ C x ≤ u), A x = b. A finite x
-// (written to `x`), or false. Linear data larger than QP_DATA_SCALE are divided by k to that
-// size (in place: the callers rebuild them every solve) and x = k y is returned. Non-finite
-// data are not handed to the solver.
-bool solve_qp(std::unique_ptr<QP>& qp, std::size_t& allocations, InverseDynamicsResult& stats,
-              const RowMatrix& P,
-              Eigen::VectorXd& q, const RowMatrix& C, Eigen::VectorXd& upper,
-              const Eigen::VectorXd& lower, const RowMatrix* A, Eigen::VectorXd* b,
+// _solve_qp: min ½ xᵀ P x + qᵀ x s.t. G x ≤ h, A x = b. A finite x (written to `x`), or
+// false. Linear data larger than QP_DATA_SCALE are divided by k to that size (in place: the
+// callers rebuild them every solve) and x = k y is returned. Non-finite data are not handed
+// to the solver. The QP's workspace is made on its first solve, sized once (reset); later
+// solves copy into it and allocate nothing.
+bool solve_qp(std::unique_ptr<QpWorkspace>& qp, std::size_t& allocations,
+              InverseDynamicsResult& stats, const RowMatrix& P, Eigen::VectorXd& q,
+              const RowMatrix& G, Eigen::VectorXd& h, const RowMatrix* A, Eigen::VectorXd* b,
               Eigen::Ref<Eigen::VectorXd> x) {
   double scale = 0.0;  // max |[q; h; b]|
-  const Eigen::VectorXd* const linear_data[] = {&q, &upper, b};
+  const Eigen::VectorXd* const linear_data[] = {&q, &h, b};
   for (const Eigen::VectorXd* linear : linear_data) {
     if (linear == nullptr) continue;
     if (!linear->allFinite()) return false;
     scale = std::max(scale, linear->lpNorm<Eigen::Infinity>());
   }
-  if (!P.allFinite() || !C.allFinite()) return false;
+  if (!P.allFinite() || !G.allFinite()) return false;
   if (A != nullptr && !A->allFinite()) return false;
   const double k = std::max(1.0, scale / kQpDataScale);
   if (k > 1.0) {
     q /= k;
-    upper /= k;
+    h /= k;
     if (b != nullptr) *b /= k;
   }
   if (q.size() == 0) {
     // solve_qp_bounded's _solve_empty: no unknowns, found if 0 ≤ h and b = 0.
-    const bool found = (upper.array() >= 0.0).all() && (b == nullptr || (b->array() == 0.0).all());
+    const bool found = (h.array() >= 0.0).all() && (b == nullptr || (b->array() == 0.0).all());
     return found;
   }
   if (!qp) {
-    qp = make_qp(q.size(), A == nullptr ? 0 : A->rows(), C.rows());
+    qp = std::make_unique<QpWorkspace>(q.size(), A == nullptr ? 0 : A->rows(), G.rows());
     ++allocations;
   }
-  using proxsuite::nullopt;
-  if (A == nullptr) {
-    qp->init(P, q, nullopt, nullopt, C, lower, upper);
-  } else {
-    qp->init(P, q, *A, *b, C, lower, upper);
+  qp->hessian = P;
+  qp->gradient = q;
+  qp->ci = -G;
+  qp->ci0 = h;
+  if (A != nullptr) {
+    qp->ce = *A;
+    qp->ce0 = -*b;
   }
-  qp->solve();
-  const proxsuite::proxqp::Info<double>& info = qp->results.info;
-  stats.qp_iterations += static_cast<int>(info.iter_ext);
-  if (info.status != proxsuite::proxqp::QPSolverOutput::PROXQP_SOLVED) {
-    ++stats.qp_failures;  // at max_iter, or (wrongly, on some feasible QPs) declared infeasible
+  const auto status = qp->solver.solve_quadprog(qp->hessian, qp->gradient, qp->ce, qp->ce0,
+                                                qp->ci, qp->ci0, qp->x);
+  stats.qp_iterations += qp->solver.getIteratios();
+  if (status != eiquadprog::solvers::EIQUADPROG_FAST_OPTIMAL) {
+    ++stats.qp_failures;  // infeasible (by rounding: every QP here is feasible) or at max_iter
     return false;
   }
-  x = qp->results.x;
+  x = qp->x;
   if (k > 1.0) x *= k;
   return x.allFinite();
 }
@@ -496,7 +503,7 @@ bool InverseDynamics::condensed_motion(SupportSet& set, const Terms& terms,
   for (Eigen::Index i = 0; i < set.points; ++i) write_pyramid(set.cones, i, set.mus[i]);
   set.cone_upper.setZero();
   if (!solve_qp(set.force_qp, workspace_allocations_, result_, set.force_hessian, set.force_gradient,
-                set.cones, set.cone_upper, set.cone_lower, nullptr, nullptr, set.point_force)) {
+                set.cones, set.cone_upper, nullptr, nullptr, set.point_force)) {
     return false;
   }
   Vector6 residual;
@@ -547,7 +554,7 @@ bool InverseDynamics::full_motion(SupportSet& set, const Terms& terms,
   set.full_upper.segment(upper_rows, joints) = torque_limit_ - h.tail(joints);
   set.full_upper.tail(joints) = torque_limit_ + h.tail(joints);
   if (!solve_qp(set.full_qp, workspace_allocations_, result_, set.full_hessian, set.full_gradient,
-                set.full_inequality, set.full_upper, set.full_lower, &set.full_equality,
+                set.full_inequality, set.full_upper, &set.full_equality,
                 &set.full_equality_rhs, set.full_solution)) {
     return false;
   }
@@ -568,7 +575,7 @@ void InverseDynamics::least_squares_balance(SupportSet& set, const Vector6& wren
   for (Eigen::Index i = 0; i < set.points; ++i) write_pyramid(set.cones, i, set.mus[i]);
   set.cone_upper.setZero();
   if (!solve_qp(set.force_qp, workspace_allocations_, result_, set.force_hessian, set.force_gradient,
-                set.cones, set.cone_upper, set.cone_lower, nullptr, nullptr, set.point_force)) {
+                set.cones, set.cone_upper, nullptr, nullptr, set.point_force)) {
     set.point_force.setZero();
   }
 }

@@ -9,12 +9,13 @@
 // nearest feasible motion (_condensed_motion's QP in the forces, the full QP in
 // [q̈, f] when its torques exceed their limits), then _least_squares_balance when no
 // solver answers; every path but the exact one ends in _realize (clipped τ, the q̈
-// they produce). The QPs are ProxQP's dense solver with the Python path's settings
-// (QP_SETTINGS, QP_ITERATION_LIMITS) and data scaling (_solve_qp, QP_DATA_SCALE).
+// they produce). The QPs are eiquadprog's EiquadprogFast (Goldfarb–Idnani's dual active-set
+// method, as the Python path's quadprog) with the Python path's data scaling (_solve_qp,
+// QP_DATA_SCALE): exactly feasible to rounding, so the two kernels agree to rounding.
 //
 // Allocation: everything a solve touches is allocated at construction or on the
 // first solve with a new combination of support flags (one SupportSet per
-// combination, holding that combination's matrices and its two ProxQP objects);
+// combination, holding that combination's matrices and its two QP solvers, each sized once);
 // later solves with those flags allocate nothing.
 #pragma once
 
@@ -58,8 +59,8 @@ struct InverseDynamicsResult {
   double root_wrench_residual = 0.0;    // ‖(M q̈ + h − J_cᵀ f)_root‖ before correction (N, N·m)
   int saturated_joints = 0;             // DoFs whose torque was clipped
   InverseDynamicsPath path = InverseDynamicsPath::exact;
-  int qp_iterations = 0;    // ProxQP's outer iterations over this solve's QPs
-  int qp_failures = 0;      // ProxQP solves of this call that gave no answer (not SOLVED)
+  int qp_iterations = 0;    // active-set iterations over this solve's QPs
+  int qp_failures = 0;      // QP solves of this call that gave no answer (not optimal)
   InverseDynamicsStatus status = InverseDynamicsStatus::ok;
   const char* detail = "";  // with a status other than ok: what was wrong (a static string)
 };
@@ -104,7 +105,7 @@ class InverseDynamics {
   Eigen::Index nv() const { return nv_; }
   const std::vector<Eigen::Index>& point_counts() const { return point_counts_; }
   const Eigen::VectorXd& torque_limit() const { return torque_limit_; }
-  // Support-flag combinations seen so far, and the ProxQP objects they hold: both grow
+  // Support-flag combinations seen so far, and the QP solvers they hold: both grow
   // only with a new combination (or its first QP), never with a repeated one.
   std::size_t support_set_count() const { return support_sets_.size(); }
   std::size_t qp_cache_size() const;

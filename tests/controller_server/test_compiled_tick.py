@@ -34,11 +34,13 @@ TOLERANCE = 1e-8
 EPSILON = float(np.finfo(float).eps)
 CONDITIONING = 10.0
 """Allowed multiple of ε κ (a backward-stable solve's forward error is a small multiple)."""
-QP_TOLERANCE = 1e-5
-"""Where the inverse dynamics solved a QP (the requested q̈ could not be realized): ProxQP's
-stopping tolerance ``eps_abs`` (1e-5), relative to the field's scale. Two solves of one QP
-from data that differ by rounding stop at points that differ by up to that much
-(``test_compiled_inverse_dynamics.py`` checks both answers' feasibility and cost)."""
+QP_AMPLIFICATION = 2.0
+"""Where the inverse dynamics solved a QP (the requested q̈ could not be realized), the bound
+is this multiple of the KKT's (``max(TOLERANCE, CONDITIONING ε κ)``): both kernels solve the
+QP by Goldfarb–Idnani's method (eiquadprog, quadprog) to rounding (the QP cases of
+``test_compiled_inverse_dynamics.py`` agree to 2.1e-9), but the optimizer's q̈, which differs
+by up to the KKT's bound, passes through the QP's active set: up to 1.06 times that bound
+seen (dino_biped, momentum; 0.18–0.80 elsewhere). With ProxQP it was its ``eps_abs``, 1e-5."""
 FIELDS = ("joint_acceleration", "joint_torque", "contact_force_in_world", "contact_wrench_in_world")
 
 
@@ -58,6 +60,8 @@ class Pair:
         self.worst = 0.0
         self.compared = 0
         self.qp_ticks = 0
+        self.worst_qp = 0.0  # over the ticks that solved a QP
+        self.worst_qp_ratio = 0.0  # their error over the KKT's bound (max(1e-8, 10 ε κ))
 
     @staticmethod
     def _ask(table: SessionTable, message):
@@ -78,9 +82,10 @@ class Pair:
         if want.diagnostics is not None:
             weighted = want.diagnostics.weighted
             condition = float(weighted.schur_condition_number)
-        bound = max(TOLERANCE, CONDITIONING * EPSILON * condition)
-        if path not in ("exact", "measured"):
-            bound = QP_TOLERANCE
+        bound = kkt_bound = max(TOLERANCE, CONDITIONING * EPSILON * condition)
+        qp = path not in ("exact", "measured")
+        if qp:
+            bound = QP_AMPLIFICATION * kkt_bound  # the optimizer's q̈ feeds the QP
             self.qp_ticks += 1
         for field in FIELDS:
             expected = np.asarray(getattr(want, field), dtype=float)
@@ -89,6 +94,9 @@ class Pair:
             error = float(np.max(np.abs(got - expected), initial=0.0)) / scale
             assert error <= bound, (field, error, bound, message.seq)
             self.worst = max(self.worst, error)
+            if qp:
+                self.worst_qp = max(self.worst_qp, error)
+                self.worst_qp_ratio = max(self.worst_qp_ratio, error / kkt_bound)
         self.compared += 1
 
 
@@ -121,7 +129,8 @@ def test_the_compiled_tick_agrees_with_the_python_tick(model, controller):
         pair.send(message.model_copy(update={"seq": 10_000 + step}))
     print(
         f"{model} {controller}: worst relative difference {pair.worst:.2e} "
-        f"over {pair.compared} commands ({pair.qp_ticks} with a QP)"
+        f"over {pair.compared} commands ({pair.qp_ticks} with a QP: worst {pair.worst_qp:.2e}, "
+        f"{pair.worst_qp_ratio:.2f} of the KKT's bound)"
     )
     assert pair.compared >= 0.9 * (RANDOM_STATES + IMU_STATES)
 

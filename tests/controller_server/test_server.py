@@ -143,7 +143,7 @@ def test_set_params_is_atomic_and_validated(server):
         ask(server, ALICE, SetParams(seq=5, params={"qp_solver": "cplex"})),
         ErrorCode.INVALID_PARAMS,
     )
-    assert welcome.params["qp_solver"] == "proxqp"
+    assert welcome.params["qp_solver"] == "quadprog"
 
 
 def test_replies_sent_as_requests_are_refused(server):
