@@ -25,14 +25,27 @@ import numpy as np
 from controller_server.behaviors import Observation
 from controller_server.compiled import load_core
 from controller_server.controllers.base import ControlInput, ControlOutput
+from controller_server.controllers.diagnostics import weighted_diagnostics
 from controller_server.dynamics import new_core
 from controller_server.errors import ControllerFailed, InvalidParams
-from controller_server.tasks import PointTask
+from controller_server.tasks import (
+    CopWeightedAngularMomentumTask,
+    LinearMomentumTask,
+    PointTask,
+    TrackingTask,
+)
 
 if TYPE_CHECKING:
     from controller_server.controllers.momentum import MomentumController
 
-__all__ = ["CompiledWeightedTick"]
+__all__ = ["COMPILED_TASKS", "CompiledWeightedTick"]
+
+COMPILED_TASKS: dict[str, type] = {
+    "tracking": TrackingTask,
+    "linear_momentum": LinearMomentumTask,
+    "angular_momentum": CopWeightedAngularMomentumTask,
+}
+"""The weighted stack's tasks that the core computes, by name (and every :class:`PointTask`)."""
 
 
 class CompiledWeightedTick:
@@ -57,6 +70,7 @@ class CompiledWeightedTick:
             ControllerFailed: The dynamics overflow at this state, or a linear solve failed.
         """
         tick, q, v = self._tick, control_input.q, control_input.v
+        self._check_tasks(controller)
         params = self._sync(controller)
         wrenches = control_input.contact_wrench_in_world
         if wrenches is not None:
@@ -97,8 +111,6 @@ class CompiledWeightedTick:
             raise ControllerFailed(failure)
         diagnostics = None
         if control_input.want_diagnostics:
-            from controller_server.controllers.momentum import weighted_diagnostics
-
             diagnostics = weighted_diagnostics(
                 controller.robot.total_mass, params["ground_height"], flags, out
             )
@@ -114,6 +126,23 @@ class CompiledWeightedTick:
     def inverse_dynamics_path(self) -> str:
         """Which branch of the inverse dynamics answered the last tick (``exact``, …)."""
         return self._tick.inverse_dynamics_path
+
+    @staticmethod
+    def _check_tasks(controller: MomentumController) -> None:
+        """Refuse a stack with a task the core does not compute (a user's, run-time task).
+
+        Raises:
+            InvalidParams: Naming the task and the kernel that solves it.
+        """
+        for slot in controller.tasks:
+            task = slot.task
+            if type(task) is not COMPILED_TASKS.get(task.name, PointTask):
+                raise InvalidParams(
+                    "params.kernel",
+                    f"task {task.name!r} ({type(task).__name__}) is not in the compiled tick, "
+                    "which solves tracking, linear_momentum, angular_momentum and point "
+                    "targets: set kernel 'python' to solve it",
+                )
 
     def _sync(self, controller: MomentumController) -> Mapping[str, Any]:
         """The parameters in force, handed to the core whenever they (or the points) changed."""

@@ -15,7 +15,7 @@ import numpy as np
 
 from controller_server.balance_points import ground_reference_points
 
-__all__ = ["CoreDiagnostics", "core_diagnostics", "with_extras"]
+__all__ = ["CoreDiagnostics", "core_diagnostics", "weighted_diagnostics", "with_extras"]
 
 
 class CoreDiagnostics(TypedDict):
@@ -106,3 +106,50 @@ def core_diagnostics(
 def with_extras(core: CoreDiagnostics, controller: str, extras: dict[str, Any]) -> dict[str, Any]:
     """The core and a controller's own section (``weighted``, ``prioritized``)."""
     return {**core, controller: extras}
+
+
+def weighted_diagnostics(
+    total_mass: float, ground_height: float, flags: tuple[bool, ...], values: Mapping[str, Any]
+) -> dict[str, Any]:
+    """The weighted controllers' diagnostics from one tick's ``values`` (either kernel's).
+
+    ``values``: the CM, momenta and their achieved rates, the optimizer's desired rates and
+    β_ba, contact origins and commanded wrenches, the support polygon, the objectives'
+    residuals at the commanded ``q̈``, the KKT's and the inverse dynamics' numbers, by the
+    names :func:`core_diagnostics` and the ``weighted`` extras use.
+    """
+    core = core_diagnostics(
+        position_com_in_world=values["position_com_in_world"],
+        linear_momentum=values["linear_momentum"],
+        angular_momentum=values["angular_momentum"],
+        total_mass=total_mass,
+        momentum_rates_desired=(
+            values["linear_momentum_rate_desired"],
+            values["angular_momentum_rate_desired"],
+        ),
+        momentum_rates_achieved=(values["linear_momentum_rate"], values["angular_momentum_rate"]),
+        position_contact_frames_in_world=values["position_contact_frames_in_world"],
+        contact_wrench_in_world=values["contact_wrench_in_world"],
+        supports=flags,
+        ground_height=ground_height,
+        support_polygon_xy=values["support_polygon_xy"],
+        objective_residuals=values["objective_residuals"],
+        constraint_residual=values["constraint_residual"],
+        root_wrench_residual=values["root_wrench_residual"],
+        saturated_joints=values["saturated_joints"],
+    )
+    return with_extras(
+        core,
+        "weighted",
+        {
+            key: values[key]
+            for key in (
+                "optimizer_ran",
+                "angular_momentum_weight",
+                "objective_condition_number",
+                "schur_condition_number",
+                "objective_damping",
+                "constraint_damping",
+            )
+        },
+    )

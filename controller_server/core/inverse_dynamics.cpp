@@ -203,8 +203,9 @@ InverseDynamics::InverseDynamics(Eigen::Index nv, std::vector<Eigen::Index> poin
     throw std::invalid_argument("torque_limit has " + std::to_string(torque_limit_.size()) +
                                 " entries, expected nv - 6 = " + std::to_string(nv_ - kRootDofs));
   }
-  if (!torque_limit_.allFinite() || (torque_limit_.array() < 0.0).any()) {
-    throw std::invalid_argument("torque_limit must be finite and >= 0");
+  // +inf: a joint without a limit (a model file that gives none), as the Python takes it.
+  if (!(torque_limit_.array() >= 0.0).all()) {
+    throw std::invalid_argument("torque_limit must be >= 0 (+inf for none), not NaN");
   }
   Eigen::Index points = 0;
   for (Eigen::Index count : point_counts_) {

@@ -282,7 +282,7 @@ def test_the_session_estimates_with_its_controllers_kernel():
     robot = load_robot_model("thesis_humanoid")
     states = [s for s in imu_sequence(robot, seed=3)[:120] if np.all(np.isfinite(s.joint_position))]
     compiled = Session(hello.model_copy(update={"params": {"kernel": "compiled"}}))
-    python = Session(hello)
+    python = Session(hello.model_copy(update={"params": {"kernel": "python"}}))
     for state in states:
         expected = python.step(state).diagnostics
         actual = compiled.step(state).diagnostics

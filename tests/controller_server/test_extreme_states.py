@@ -18,6 +18,7 @@ import qpsolvers
 
 from controller_server.controllers import CONTROLLERS, ControlInput, create_controller
 from controller_server.controllers.base import Controller, ControllerFailed
+from controller_server.controllers.compiled_tick import CompiledWeightedTick
 from controller_server.errors import InvalidParams, ServerFault, wire_code
 from controller_server.features import Objective
 from controller_server.models import load_robot_model
@@ -136,7 +137,8 @@ def test_a_failed_linear_solve_is_a_typed_error(robot, name, monkeypatch):
     def singular(*args, **kwargs):
         raise np.linalg.LinAlgError("Singular matrix")
 
-    monkeypatch.setattr(Controller, "_dynamics_terms", singular)  # either kernel
+    monkeypatch.setattr(Controller, "_dynamics_terms", singular)
+    monkeypatch.setattr(CompiledWeightedTick, "compute", singular)  # the compiled tick's
     controller = create_controller(name, robot)
     with pytest.raises(ControllerFailed, match=r"linear solve failed.*Singular matrix"):
         controller.compute(standing_input(robot, "joint", 0.0))

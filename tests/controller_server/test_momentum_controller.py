@@ -244,6 +244,7 @@ def test_clip_drives_the_tracking_reference():
             "clip_speed": 2.0,
             "weight_linear_momentum": 0.0,
             "angular_momentum_gain": 0.0,
+            "kernel": "python",  # reads the Python tick's rows (the compiled tick's agree)
         },
     )
     time_s = 1.3

@@ -12,6 +12,7 @@ import pytest
 from clients.client import ServerError
 from controller_server import errors
 from controller_server.controllers import Controller
+from controller_server.controllers.compiled_tick import CompiledWeightedTick
 from controller_server.errors import ControllerFailed, ServerFault, wire_code
 from controller_server.session_table import SessionTable
 from protocol import ErrorCode, decode, encode
@@ -61,6 +62,7 @@ def test_a_failed_linear_solve_is_solve_failed_without_traceback(controller, mon
 
     # Either kernel: the controllers take their dynamics terms from one method of the base.
     monkeypatch.setattr(Controller, "_dynamics_terms", singular)
+    monkeypatch.setattr(CompiledWeightedTick, "compute", singular)  # the compiled tick's
     state = random_state(welcome, np.random.default_rng(0)).model_copy(update={"seq": 7})
     with caplog.at_level(logging.DEBUG):
         reply = ask(table, state)

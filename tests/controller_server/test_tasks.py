@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from controller_server.controllers import ControlInput, create_controller
+from controller_server.errors import InvalidParams
 from controller_server.features import Objective
 from controller_server.models import load_robot_model
 from controller_server.tasks import Task, TaskStack, Tick
@@ -101,7 +102,8 @@ def test_a_task_added_at_run_time_moves_the_solution_and_removed_gives_it_back(r
     with it the root's commanded yaw acceleration comes most of the way to TURN_RAD_S2,
     without it (added, then removed) the command is bit for bit the controller's own.
     """
-    params = {"optimizer_period_ticks": 1} if name == "momentum" else {}
+    # A user's task is Python: the weighted controllers solve it with the Python tick.
+    params = {"optimizer_period_ticks": 1, "kernel": "python"} if name == "momentum" else {}
     plain = create_controller(name, robot, params)
     with_task = create_controller(name, robot, params)
     removed = create_controller(name, robot, params)
@@ -125,6 +127,20 @@ def test_a_task_added_at_run_time_moves_the_solution_and_removed_gives_it_back(r
     assert "pelvis_turn" not in back.diagnostics["objective_residuals"]
     np.testing.assert_array_equal(back.acceleration, own.acceleration)
     np.testing.assert_array_equal(back.joint_torque, own.joint_torque)
+
+
+def test_the_compiled_tick_refuses_a_task_it_does_not_compute(robot):
+    """The weighted controllers' compiled tick knows its own tasks only: a user's task is a
+    typed error naming the kernel that solves it, never silently left out."""
+    controller = create_controller("momentum", robot)
+    assert controller.parameters()["kernel"] == "compiled"
+    controller.tasks.add(PelvisTurn(), weight=100.0)
+    with pytest.raises(InvalidParams, match=r"pelvis_turn.*kernel 'python'"):
+        controller.compute(standing(robot))
+    controller.set_params({"kernel": "python"})
+    assert (
+        controller.compute(standing(robot)).diagnostics["objective_residuals"]["pelvis_turn"] >= 0
+    )
 
 
 def _levels(output) -> list[list[str]]:
