@@ -1,4 +1,5 @@
 #include "dynamics_core.hpp"
+#include "frame_point.hpp"
 
 #include <stdexcept>
 #include <string>
@@ -115,14 +116,10 @@ void DynamicsCore::compute(const Eigen::Ref<const Eigen::VectorXd>& q,
     const Eigen::Vector3d omega = velocity.angular();
     for (Eigen::Index i = 0; i < count; ++i) {
       const Eigen::Vector3d r = offsets.row(i).transpose();
-      const Eigen::Matrix3d r_cross = pinocchio::skew(r);  // [r]× w = r × w
       terms.point_wrench_map.block<3, 3>(0, 3 * i).setIdentity();
-      terms.point_wrench_map.block<3, 3>(3, 3 * i) = r_cross;
-      terms.point_jacobian.middleRows<3>(3 * i) =
-          frame_jacobian_.topRows<3>() - r_cross * frame_jacobian_.bottomRows<3>();
-      // ω × (ω × r) = ω (ω · r) − |ω|² r
-      terms.point_drift.segment<3>(3 * i) = drift.linear() - r_cross * drift.angular() +
-                                            omega * omega.dot(r) - omega.squaredNorm() * r;
+      terms.point_wrench_map.block<3, 3>(3, 3 * i) = pinocchio::skew(r);
+      frame_point_rows(frame_jacobian_, drift, omega, r, terms.point_jacobian.middleRows<3>(3 * i),
+                       terms.point_drift.segment<3>(3 * i));
     }
   }
 }

@@ -8,6 +8,8 @@
 #include <pinocchio/algorithm/joint-configuration.hpp>
 #include <pinocchio/spatial.hpp>
 
+#include "frame_point.hpp"
+
 namespace poise {
 
 namespace {
@@ -185,13 +187,11 @@ void WeightedOptimizer::point(const Model& model, Data& data, const PointTarget&
       pinocchio::getFrameClassicalAcceleration(model, data, target.frame_id, kWorldAligned);
   const pinocchio::SE3& placement = data.oMf[target.frame_id];
   const Eigen::Vector3d r = placement.rotation() * target.offset_in_frame;
-  const Eigen::Matrix3d r_cross = pinocchio::skew(r);
   const Eigen::Vector3d omega = velocity.angular();
   const Eigen::Vector3d position = placement.translation() + r;
-  const Eigen::Vector3d point_velocity = velocity.linear() - r_cross * omega;
-  const Eigen::Vector3d point_drift = drift.linear() - r_cross * drift.angular() +
-                                      omega * omega.dot(r) - omega.squaredNorm() * r;
-  rows.A = frame_jacobian_.topRows<3>() - r_cross * frame_jacobian_.bottomRows<3>();
+  const Eigen::Vector3d point_velocity = velocity.linear() - pinocchio::skew(r) * omega;
+  Eigen::Vector3d point_drift;
+  frame_point_rows(frame_jacobian_, drift, omega, r, rows.A, point_drift);
   rows.b = target.stiffness * (target.target_position_in_world - position) +
            target.damping * (target.target_velocity_in_world - point_velocity) - point_drift;
   rows.weight = target.weight;
