@@ -61,6 +61,7 @@ class CompiledWeightedTick:
         self._tick.set_limits(controller.joint_limits().compiled())
         self._model = robot.model
         self._synced: Mapping[str, Any] | None = None  # the parameters the core holds
+        self._synced_points: tuple[tuple[PointTask, float], ...] = ()  # its point targets
 
     def compute(self, controller: MomentumController, control_input: ControlInput) -> ControlOutput:
         """One tick of ``controller`` by the core.
@@ -70,8 +71,7 @@ class CompiledWeightedTick:
             ControllerFailed: The dynamics overflow at this state, or a linear solve failed.
         """
         tick, q, v = self._tick, control_input.q, control_input.v
-        self._check_tasks(controller)
-        params = self._sync(controller)
+        params = self._sync(controller, self._check_tasks(controller))
         wrenches = control_input.contact_wrench_in_world
         if wrenches is not None:
             wrenches = np.ascontiguousarray(wrenches, dtype=float).reshape(-1, 6)
@@ -88,15 +88,13 @@ class CompiledWeightedTick:
             tick.prepare(q, v)
             prepared = True
             controller._host(control_input, lambda: self._observation(controller, control_input))
-            params = self._sync(controller)
+            params = self._sync(controller, self._synced_points)
         clip = controller.clip_sample(control_input.time_s)
         out = tick.compute(
             q,
             v,
             supports,
-            None
-            if wrenches is None
-            else np.ascontiguousarray(wrenches, dtype=float).reshape(-1, 6),
+            wrenches,
             *(clip if clip is not None else (None, None, None)),
             prepared,
             control_input.want_diagnostics,
@@ -128,14 +126,19 @@ class CompiledWeightedTick:
         return self._tick.inverse_dynamics_path
 
     @staticmethod
-    def _check_tasks(controller: MomentumController) -> None:
-        """Refuse a stack with a task the core does not compute (a user's, run-time task).
+    def _check_tasks(controller: MomentumController) -> tuple[tuple[PointTask, float], ...]:
+        """The stack's point targets and weights (compared by identity), or a refusal.
+
+        A task the core does not compute (a user's, run-time task) is refused.
 
         Raises:
             InvalidParams: Naming the task and the kernel that solves it.
         """
+        points = []
         for slot in controller.tasks:
             task = slot.task
+            if isinstance(task, PointTask):
+                points.append((task, slot.weight))
             if type(task) is not COMPILED_TASKS.get(task.name, PointTask):
                 raise InvalidParams(
                     "params.kernel",
@@ -143,11 +146,14 @@ class CompiledWeightedTick:
                     "which solves tracking, linear_momentum, angular_momentum and point "
                     "targets: set kernel 'python' to solve it",
                 )
+        return tuple(points)
 
-    def _sync(self, controller: MomentumController) -> Mapping[str, Any]:
+    def _sync(
+        self, controller: MomentumController, points: tuple[tuple[PointTask, float], ...]
+    ) -> Mapping[str, Any]:
         """The parameters in force, handed to the core whenever they (or the points) changed."""
         params = controller.in_force()
-        if params is not self._synced:
+        if params is not self._synced or points != self._synced_points:
             self._tick.set_params(params)
             self._tick.set_points(
                 [
@@ -156,7 +162,7 @@ class CompiledWeightedTick:
                     if isinstance(slot.task, PointTask)
                 ]
             )
-            self._synced = params
+            self._synced, self._synced_points = params, points
         return params
 
     def _point(self, task: PointTask, weight: float) -> tuple[Any, ...]:

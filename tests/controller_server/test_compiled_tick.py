@@ -22,8 +22,10 @@ from clients.replay import read_recorded
 from clients.sampling import random_state
 from clients.state import RobotState
 from controller_server.controllers import ControlInput, create_controller
+from controller_server.controllers.point_targets import point_target
 from controller_server.models import BUILTIN_MODELS, load_robot_model
 from controller_server.session_table import SessionTable
+from controller_server.tasks import PointTask
 from protocol import decode, encode
 from protocol.messages import Command, Error, Hello, ImuSample, SetParams, State, Welcome
 
@@ -184,3 +186,39 @@ def test_behaviours_clips_and_points_run_in_the_compiled_tick():
                 bound = max(TOLERANCE, CONDITIONING * EPSILON * condition)
                 assert np.max(np.abs(got - want)) / scale <= bound, (params, step, field)
             assert outputs["compiled"].diagnostics.keys() == outputs["python"].diagnostics.keys()
+
+
+def test_a_point_target_added_on_the_stack_reaches_the_compiled_tick():
+    """Point targets added through the stack (not set_params) are solved too, and dropped."""
+    robot = load_robot_model("thesis_humanoid")
+    target = point_target(
+        robot,
+        "point:head",
+        {"frame": "head", "target_position_in_world": [0.2, 0.1, 1.5]},
+    )
+    controllers = {
+        kernel: create_controller("momentum", robot, {"kernel": kernel})
+        for kernel in ("compiled", "python")
+    }
+    weight_share = [0, 0, robot.total_mass * 9.81 / len(robot.contacts), 0, 0, 0]
+    state = ControlInput(  # measured wrenches: β_ba of eq. 5.17 does not depend on the last tick
+        0.0,
+        robot.standing_configuration.copy(),
+        np.zeros(robot.model.nv),
+        tuple([True] * len(robot.contacts)),
+        np.tile(weight_share, (len(robot.contacts), 1)),
+    )
+    plain = controllers["compiled"].compute(state).acceleration
+    for controller in controllers.values():
+        controller.tasks.add(PointTask("head", target), weight=5.0)
+    outputs = {kernel: c.compute(state) for kernel, c in controllers.items()}
+    assert "point:head" in outputs["compiled"].diagnostics["objective_residuals"]
+    scale = float(np.max(np.abs(outputs["python"].acceleration)))
+    assert np.max(np.abs(outputs["compiled"].acceleration - plain)) > 1e-6 * scale
+    np.testing.assert_allclose(
+        outputs["compiled"].acceleration, outputs["python"].acceleration, rtol=0, atol=1e-6 * scale
+    )
+    controllers["compiled"].tasks.remove("point:head")
+    np.testing.assert_allclose(
+        controllers["compiled"].compute(state).acceleration, plain, rtol=0, atol=1e-12 * scale
+    )
