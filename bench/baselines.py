@@ -25,6 +25,21 @@ def timed(step: Callable[[Any], object], items: Iterable[Any]) -> list[float]:
     return times
 
 
+def alternating_times(
+    variants: dict[str, Callable[[Any], object]], items: list[Any], chunks: int, warmup: int
+) -> dict[str, list[float]]:
+    """:func:`timed` of every variant on ``items``, after ``warmup`` untimed calls each, in
+    ``chunks`` alternating slices, so that all of them see the same machine load."""
+    for step in variants.values():
+        timed(step, items[:warmup])
+    times: dict[str, list[float]] = {label: [] for label in variants}
+    for chunk in range(chunks):
+        part = slice(chunk * len(items) // chunks, (chunk + 1) * len(items) // chunks)
+        for label, step in variants.items():
+            times[label] += timed(step, items[part])
+    return times
+
+
 def echo_server(endpoint_queue: multiprocessing.Queue, reply_size: int) -> None:
     """A ROUTER on a free loopback port answering every request with ``reply_size`` bytes.
 

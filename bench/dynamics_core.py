@@ -23,7 +23,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin
-from baselines import timed
+from baselines import alternating_times
 
 from controller_server.compiled import load_core
 from controller_server.dynamics import CompiledDynamics, compute_dynamics_terms
@@ -70,13 +70,7 @@ def main() -> None:
         robot = load_robot_model(name)
         variants = calls(robot)
         states = random_states(robot, args.calls, rng)
-        for step in variants.values():
-            timed(step, states[:WARMUP_CALLS])
-        times: dict[str, list[float]] = {label: [] for label in variants}
-        for chunk in range(args.chunks):
-            part = slice(chunk * args.calls // args.chunks, (chunk + 1) * args.calls // args.chunks)
-            for label, step in variants.items():
-                times[label] += timed(step, states[part])
+        times = alternating_times(variants, states, args.chunks, WARMUP_CALLS)
         python50 = float(np.percentile(times["python"], 50))
         for label, samples in times.items():
             p50, p99 = np.percentile(samples, [50, 99])

@@ -22,7 +22,7 @@ import os
 
 import numpy as np
 import pinocchio as pin
-from baselines import timed
+from baselines import alternating_times
 
 from controller_server.features.joint_limits import JointLimitSet, default_joint_limits
 from controller_server.models import BUILTIN_MODELS, RobotModel, load_robot_model
@@ -67,15 +67,7 @@ def main() -> None:
                     for limit in limit_set.limits
                 ]
             )
-            for step in variants.values():
-                timed(step, states[:WARMUP_CALLS])
-            times: dict[str, list[float]] = {label: [] for label in variants}
-            for chunk in range(args.chunks):
-                part = slice(
-                    chunk * args.calls // args.chunks, (chunk + 1) * args.calls // args.chunks
-                )
-                for label, step in variants.items():
-                    times[label] += timed(step, states[part])
+            times = alternating_times(variants, states, args.chunks, WARMUP_CALLS)
             python50 = float(np.percentile(times["python"], 50))
             for label, samples in times.items():
                 p50, p99 = np.percentile(samples, [50, 99])

@@ -34,22 +34,18 @@ void chain(const Polygon& ordered, bool reversed, Polygon& hull) {
   }
 }
 
-// balance_points._corners, in place: drop the vertices whose edges turn by less than
-// COLLINEAR_SINE and that lie between their neighbours (not where the boundary turns back).
-void corners(Polygon& vertices) {
+// Drops, one at a time until none is left, a vertex v_i for which
+// drop(v_i − v_{i−1}, v_{i+1} − v_i) holds (the loop of _corners and _turning_vertices).
+template <typename Drop>
+void drop_vertices(Polygon& vertices, Drop drop) {
   bool removed = true;
   while (removed && vertices.size() >= 3) {
     removed = false;
     const std::size_t n = vertices.size();
     for (std::size_t i = 0; i < n; ++i) {
-      const Eigen::Vector2d& p = vertices[(i + n - 1) % n];
-      const Eigen::Vector2d& c = vertices[i];
-      const Eigen::Vector2d& nx = vertices[(i + 1) % n];
-      const double bx = c.x() - p.x(), by = c.y() - p.y();
-      const double ax = nx.x() - c.x(), ay = nx.y() - c.y();
-      const bool forward = bx * ax + by * ay > 0.0;
-      if (forward &&
-          std::abs(bx * ay - by * ax) <= kCollinearSine * std::hypot(bx, by) * std::hypot(ax, ay)) {
+      const Eigen::Vector2d before = vertices[i] - vertices[(i + n - 1) % n];
+      const Eigen::Vector2d after = vertices[(i + 1) % n] - vertices[i];
+      if (drop(before.x(), before.y(), after.x(), after.y())) {
         vertices.erase(vertices.begin() + static_cast<std::ptrdiff_t>(i));
         removed = true;
         break;
@@ -58,25 +54,22 @@ void corners(Polygon& vertices) {
   }
 }
 
-// balance_points._turning_vertices, in place.
+// balance_points._corners, in place: drop the vertices whose edges turn by less than
+// COLLINEAR_SINE and that lie between their neighbours (not where the boundary turns back).
+void corners(Polygon& vertices) {
+  drop_vertices(vertices, [](double bx, double by, double ax, double ay) {
+    const bool forward = bx * ax + by * ay > 0.0;
+    return forward &&
+           std::abs(bx * ay - by * ax) <= kCollinearSine * std::hypot(bx, by) * std::hypot(ax, ay);
+  });
+}
+
+// balance_points._turning_vertices, in place: drop the vertices where the closed polygon
+// does not turn left by more than round-off.
 void turning_vertices(Polygon& vertices) {
-  while (vertices.size() >= 3) {
-    bool removed = false;
-    const std::size_t n = vertices.size();
-    for (std::size_t i = 0; i < n; ++i) {
-      const Eigen::Vector2d& p = vertices[(i + n - 1) % n];
-      const Eigen::Vector2d& c = vertices[i];
-      const Eigen::Vector2d& nx = vertices[(i + 1) % n];
-      const double bx = c.x() - p.x(), by = c.y() - p.y();
-      const double ax = nx.x() - c.x(), ay = nx.y() - c.y();
-      if (!(bx * ay - by * ax > kCollinearSine * std::hypot(bx, by) * std::hypot(ax, ay))) {
-        vertices.erase(vertices.begin() + static_cast<std::ptrdiff_t>(i));
-        removed = true;
-        break;
-      }
-    }
-    if (!removed) break;
-  }
+  drop_vertices(vertices, [](double bx, double by, double ax, double ay) {
+    return !(bx * ay - by * ax > kCollinearSine * std::hypot(bx, by) * std::hypot(ax, ay));
+  });
 }
 
 // balance_points.polygon_width of the turning vertices `vertices`.

@@ -116,13 +116,9 @@ nb::object vector(const Eigen::Ref<const Eigen::VectorXd>& value) {
   return nb::cast(Eigen::VectorXd(value));
 }
 
-// One whole tick: a dict of fresh arrays (ControlOutput's fields), "failure" (str or None),
-// "optimizer_ran", and with want_diagnostics what MomentumController._diagnostics reads.
-nb::dict compute(WeightedTick& tick, VectorRef q, VectorRef v, const std::vector<bool>& supports,
-                 std::optional<Eigen::Ref<const RowMatrix>> measured_wrenches,
-                 std::optional<VectorRef> q_ref,
-                 std::optional<VectorRef> v_ref, std::optional<VectorRef> a_ref, bool prepared,
-                 bool want_diagnostics) {
+// The state's sizes against the tick's model and contacts (ValueError otherwise).
+void check_state(const WeightedTick& tick, VectorRef q, VectorRef v,
+                 const std::vector<bool>& supports) {
   const Model& model = tick.model();
   if (q.size() != model.nq || v.size() != model.nv) {
     throw std::invalid_argument("q or v has the wrong size");
@@ -130,6 +126,16 @@ nb::dict compute(WeightedTick& tick, VectorRef q, VectorRef v, const std::vector
   if (supports.size() != tick.terms().contacts.size()) {
     throw std::invalid_argument("one support flag per contact is needed");
   }
+}
+
+// One whole tick: a dict of fresh arrays (ControlOutput's fields), "failure" (str or None),
+// "optimizer_ran", and with want_diagnostics what MomentumController._diagnostics reads.
+nb::dict compute(WeightedTick& tick, VectorRef q, VectorRef v, const std::vector<bool>& supports,
+                 std::optional<Eigen::Ref<const RowMatrix>> measured_wrenches,
+                 std::optional<VectorRef> q_ref,
+                 std::optional<VectorRef> v_ref, std::optional<VectorRef> a_ref, bool prepared,
+                 bool want_diagnostics) {
+  check_state(tick, q, v, supports);
   const RowMatrix none(0, 6);
   const Eigen::VectorXd empty(0);
   std::string failure;
@@ -185,13 +191,8 @@ nb::dict compute(WeightedTick& tick, VectorRef q, VectorRef v, const std::vector
 // per-tick seconds, for the benchmarks and the allocation count of the tests.
 std::vector<double> time_compute(WeightedTick& tick, VectorRef q, VectorRef v,
                                  const std::vector<bool>& supports, int repeats) {
-  const Model& model = tick.model();
-  if (q.size() != model.nq || v.size() != model.nv || repeats < 0) {
-    throw std::invalid_argument("q or v has the wrong size, or repeats < 0");
-  }
-  if (supports.size() != tick.terms().contacts.size()) {
-    throw std::invalid_argument("one support flag per contact is needed");
-  }
+  check_state(tick, q, v, supports);
+  if (repeats < 0) throw std::invalid_argument("repeats < 0");
   std::vector<double> seconds(static_cast<std::size_t>(repeats));
   const RowMatrix none(0, 6);
   const Eigen::VectorXd empty(0);

@@ -270,8 +270,12 @@ void InverseDynamics::check_sizes(const Terms& terms, const char* caller) const 
 }
 
 // The terms solve() reads, and q̈: finite, or status non_finite_input naming the first that is not.
-bool InverseDynamics::check_terms(const Terms& terms,
+bool InverseDynamics::start_solve(const Terms& terms,
                                   const Eigen::Ref<const Eigen::VectorXd>& acceleration) {
+  result_.status = InverseDynamicsStatus::ok;
+  result_.detail = "";
+  result_.qp_iterations = 0;
+  result_.qp_failures = 0;
   const char* bad = nullptr;
   if (!acceleration.allFinite()) {
     bad = "acceleration is not finite";
@@ -310,11 +314,7 @@ const InverseDynamicsResult& InverseDynamics::solve(
         std::to_string(contact_count) + " contacts (terms, acceleration, supports, friction)");
   }
   check_sizes(terms, "InverseDynamics.solve");
-  result_.status = InverseDynamicsStatus::ok;
-  result_.detail = "";
-  result_.qp_iterations = 0;
-  result_.qp_failures = 0;
-  if (!check_terms(terms, acceleration)) return result_;
+  if (!start_solve(terms, acceleration)) return result_;
   if (!std::isfinite(weights.force_regularization) || !std::isfinite(weights.support_weight)) {
     result_.status = InverseDynamicsStatus::non_finite_input;
     result_.detail = "force_regularization or support_weight is not finite";
@@ -408,11 +408,7 @@ const InverseDynamicsResult& InverseDynamics::solve_measured(
                                 ", 6) measured wrenches");
   }
   check_sizes(terms, "InverseDynamics.solve_measured");
-  result_.status = InverseDynamicsStatus::ok;
-  result_.detail = "";
-  result_.qp_iterations = 0;
-  result_.qp_failures = 0;
-  if (!check_terms(terms, acceleration)) return result_;
+  if (!start_solve(terms, acceleration)) return result_;
   if (!measured_wrenches_in_world.allFinite()) {
     result_.status = InverseDynamicsStatus::non_finite_input;
     result_.detail = "measured_wrenches is not finite";

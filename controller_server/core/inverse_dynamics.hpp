@@ -116,7 +116,9 @@ class InverseDynamics {
  private:
   SupportSet& support_set(const std::vector<bool>& supports);
   void check_sizes(const Terms& terms, const char* caller) const;
-  bool check_terms(const Terms& terms, const Eigen::Ref<const Eigen::VectorXd>& acceleration);
+  // A new solve: the result's status and counters cleared, then false (status
+  // non_finite_input) if the terms or the acceleration are not finite.
+  bool start_solve(const Terms& terms, const Eigen::Ref<const Eigen::VectorXd>& acceleration);
   bool minimum_norm_balance(SupportSet& set, const Eigen::Matrix<double, 6, 1>& wrench);
   bool condensed_motion(SupportSet& set, const Terms& terms,
                         const Eigen::Ref<const Eigen::VectorXd>& acceleration,

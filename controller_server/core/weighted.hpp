@@ -96,6 +96,8 @@ class WeightedOptimizer {
 
   // The support polygon of the supporting contacts' sole points (counter-clockwise).
   void support_polygon(const Terms& terms, const std::vector<bool>& supports, Polygon& hull);
+  // The support polygon the last optimizer run built.
+  const Polygon& last_support_polygon() const { return polygon_; }
 
   const OptimizerReport& report() const { return report_; }
   // The report with the KKT's condition numbers estimated (diagnostics only).

@@ -154,7 +154,11 @@ void WeightedTick::fill_diagnostics(const std::vector<bool>& supports) {
   diagnostics_.linear_momentum_rate += terms_.r_bias;
   diagnostics_.angular_momentum_rate.noalias() = terms_.S * acceleration;
   diagnostics_.angular_momentum_rate += terms_.s_bias;
-  optimizer_.support_polygon(terms_, supports, diagnostics_.support_polygon);
+  if (optimizer_ran_) {  // built for the optimizer this tick
+    diagnostics_.support_polygon = optimizer_.last_support_polygon();
+  } else {
+    optimizer_.support_polygon(terms_, supports, diagnostics_.support_polygon);
+  }
   optimizer_.residuals(acceleration, diagnostics_.objective_residuals);
   optimizer_.report_with_conditioning();
 }
