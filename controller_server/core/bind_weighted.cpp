@@ -242,7 +242,6 @@ void bind_weighted(nb::module_& m) {
            "Take the optimizer's parameters from a dict of parameter values (those present).")
       .def("set_points", &set_points, "targets"_a,
            "Point targets as (name, frame_id, offset, position, velocity, k_s, k_d, weight).")
-      .def("reset", &WeightedTick::reset, "Forget the last solution.")
       .def_prop_ro(
           "report",
           [](WeightedTick& tick) {

@@ -32,7 +32,6 @@ WeightedTick::WeightedTick(const DynamicsCore& core, Eigen::VectorXd torque_limi
   params.friction_coefficients = Eigen::VectorXd::Ones(contact_count);
   params.reference_configuration = Eigen::VectorXd::Zero(core.model().nq);
   params.reference_configuration(6) = 1.0;
-  last_wrenches_.resize(0, 6);
   diagnostics_.support_polygon.reserve(64);
   diagnostics_.objective_residuals.reserve(16);
 }
@@ -42,12 +41,6 @@ void WeightedTick::set_limits(JointLimits limits) {
     throw std::invalid_argument("joint limits for another number of DoFs");
   }
   limits_.emplace(std::move(limits));
-}
-
-void WeightedTick::reset() {
-  solved_ = false;
-  ticks_ = 0;
-  last_wrenches_.resize(0, 6);
 }
 
 bool WeightedTick::optimizer_due(const std::vector<bool>& supports) const {

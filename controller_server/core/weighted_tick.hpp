@@ -43,8 +43,6 @@ class WeightedTick {
   bool measured_ground_forces = false;  // ground_force_mode "measured"
   InverseDynamicsWeights weights;       // force_regularization, support_weight
 
-  // Forget the last solution (the next tick runs the optimizer).
-  void reset();
   // Whether the next tick with these supports runs the optimizer (MomentumController).
   bool optimizer_due(const std::vector<bool>& supports) const;
 
@@ -86,7 +84,6 @@ class WeightedTick {
   const InverseDynamicsResult& result() const { return inverse_dynamics_.result(); }
   const TickDiagnostics& diagnostics() const { return diagnostics_; }
   bool optimizer_ran() const { return optimizer_ran_; }
-  double gravity() const { return gravity_; }
 
  private:
   std::string check_finite() const;
